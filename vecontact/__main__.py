@@ -1,0 +1,3 @@
+from vecontact.cli import main
+
+raise SystemExit(main())
