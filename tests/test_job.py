@@ -1,0 +1,179 @@
+"""Job validation: every bad job gives one line naming the key, exit 2, no traceback, no file."""
+import copy
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from vecontact import job as jobs
+from vecontact.errors import InputError
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+GOOD = {
+    "output": "out.h5",
+    "surface": {"spectrum": "self-affine", "q0": 2.5e5, "qr": 1.0e6, "q1": [2.0e6, 4.0e6],
+                "hurst": 0.8, "C0": 1.0616e-28, "null_band": 4, "seeds": [1, 2]},
+    "material": {"model": "havriliak-negami", "E0": 3.0e6, "Einf": 3.0e9, "alpha": 0.5,
+                 "beta": 0.5, "tau": 1.0e-10, "nu": 0.5},
+    "sweep": {"velocity": [0.01, 1.0], "pressure": {"min": 1.0e4, "max": 1.0e6, "num": 3}},
+    "theory": {"gamma": 0.5},
+    "numerics": {"enabled": False},
+}
+
+
+def _bad(path, value):
+    """GOOD with the dotted key set to value (or removed when value is ...)."""
+    job = copy.deepcopy(GOOD)
+    keys = path.split(".")
+    d = job
+    for k in keys[:-1]:
+        d = d[k]
+    if value is ...:
+        del d[keys[-1]]
+    else:
+        d[keys[-1]] = value
+    return job
+
+
+# (change, key the message must name)
+BAD = [
+    (("surface.q1", [5.0e5]), "surface.q1"),                     # q1 <= qr
+    (("surface.qr", 1.0e5), "surface.qr"),                       # qr < q0
+    (("surface.hurst", 1.0), "surface.hurst"),                   # H must be < 1
+    (("surface.hurst", 0.0), "surface.hurst"),                   # H must be > 0
+    (("surface.C0", -1.0), "surface.C0"),
+    (("surface.q1", [2.0e6, 2.1e6]), "surface.q1"),              # non-integer grid size
+    (("surface.colour", "red"), "surface.colour"),               # unknown key
+    (("surface.seeds", [1.5]), "surface.seeds"),                 # not an integer
+    (("surface.spectrum", "fractal"), "surface.spectrum"),
+    (("material.model", "maxwell"), "material.model"),
+    (("material.Einf", 1.0e6), "material.Einf"),                 # Einf < E0
+    (("material.nu", 0.7), "material.nu"),
+    (("material.alpha", 1.5), "material.alpha"),
+    (("material.tau", ...), "material.tau"),                     # missing
+    (("sweep.pressure", [1.0e4, -5.0]), "sweep.pressure"),       # pressure <= 0
+    (("sweep.pressure", {"min": 1e6, "max": 1e4, "num": 3}), "sweep.pressure.max"),
+    (("sweep.pressure", {"min": 1e4, "max": 1e6}), "sweep.pressure.num"),
+    (("sweep.velocity", [-1.0]), "sweep.velocity"),
+    (("sweep.velocity", "fast"), "sweep.velocity"),
+    (("theory.gamma", 2.0), "theory.gamma"),
+    (("numerics.tolerance", 0.0), "numerics.tolerance"),
+    (("numerics.solver", "pk"), "numerics.solver"),              # PK with a viscoelastic solid
+    (("numerics.fields", ["stress"]), "numerics.fields"),
+    (("numerics.enabled", "yes"), "numerics.enabled"),
+    (("output", "results.txt"), "output"),
+    (("surface", ...), "surface"),
+]
+
+
+@pytest.mark.parametrize("change,key", BAD, ids=[f"{c[0]}={c[1]!r}"[:60] for c, _ in BAD])
+def test_bad_job_names_key(change, key):
+    with pytest.raises(InputError) as err:
+        jobs.resolve(_bad(*change), base=ROOT)
+    assert err.value.key == key
+    assert "\n" not in str(err.value)
+
+
+def test_unknown_top_level_and_type_errors():
+    with pytest.raises(InputError, match="^solver: unknown key"):
+        jobs.resolve(dict(GOOD, solver={}), ROOT)
+    with pytest.raises(InputError, match="must be a mapping"):
+        jobs.resolve(dict(GOOD, material=[1, 2]), ROOT)
+    with pytest.raises(InputError, match="YAML mapping"):
+        jobs.resolve([1, 2], ROOT)
+
+
+def test_resolved_defaults_and_grid():
+    job = jobs.resolve(copy.deepcopy(GOOD), ROOT)
+    assert job["surface"]["grid"] == {repr(2.0e6): 64, repr(4.0e6): 128}    # N = 2 nb q1/q0
+    assert job["numerics"]["tolerance"] == 1e-8
+    assert job["sweep"]["pressure"] == pytest.approx([1e4, 1e5, 1e6], rel=1e-12)
+    assert job["output"] == os.path.join(ROOT, "out.h5")
+    # a numeric string (YAML reads 1e4 without a dot as a string) is accepted
+    job2 = jobs.resolve(_bad("sweep.pressure", ["1e4"]), ROOT)
+    assert job2["sweep"]["pressure"] == [1e4]
+
+
+def test_hrms_normalises_largest_q1():
+    j = _bad("surface.C0", ...)
+    j["surface"]["hrms"] = 27e-9
+    job = jobs.resolve(j, ROOT)
+    from vecontact.cases import spectrum_for
+    assert spectrum_for(job, 4.0e6).hrms() == pytest.approx(27e-9, rel=1e-12)
+    assert spectrum_for(job, 2.0e6).hrms() < 27e-9
+
+
+def test_physics_hash_ignores_output_only():
+    a = jobs.resolve(copy.deepcopy(GOOD), ROOT)
+    b = jobs.resolve(_bad("output", "elsewhere.h5"), ROOT)
+    c = jobs.resolve(_bad("material.E0", 4.0e6), ROOT)
+    assert jobs.physics_hash(a) == jobs.physics_hash(b)
+    assert jobs.physics_hash(a) != jobs.physics_hash(c)
+
+
+def test_petsc_options_forms():
+    a = jobs.resolve(_bad("numerics.petsc", {"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3}), ROOT)
+    b = jobs.resolve(_bad("numerics.petsc", "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor"), ROOT)
+    assert a["numerics"]["petsc"] == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001"}
+    assert b["numerics"]["petsc"] == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None}
+
+
+@pytest.mark.parametrize("change,key", BAD[:14], ids=[str(c[0]) for c, _ in BAD[:14]])
+def test_cli_bad_job_exit_2_one_line_nothing_written(tmp_path, change, key):
+    job = _bad(*change)
+    job["output"] = str(tmp_path / "out.h5")
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path)], capture_output=True,
+                          text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"vecontact: error: {key}"), proc.stderr
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+
+
+def test_cli_missing_and_malformed_files(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("surface: [unclosed\n")
+    for args in (["run", str(tmp_path / "nope.yaml")], ["run", str(bad)], ["plot", str(bad)],
+                 ["frobnicate"]):
+        proc = subprocess.run([sys.executable, "-m", "vecontact"] + args, capture_output=True,
+                              text=True, timeout=60)
+        assert proc.returncode == 2, args
+        assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_shipped_jobs_are_valid():
+    for name in ("demo.yaml", "paper.yaml", "paper-small.yaml"):
+        path = os.path.join(ROOT, "jobs", name)
+        if name == "paper-small.yaml" and not os.path.exists(path):
+            continue
+        job = jobs.load(path)
+        assert job["material"]["model"] == "havriliak-negami"
+    paper = jobs.load(os.path.join(ROOT, "jobs", "paper.yaml"))
+    q0 = paper["surface"]["q0"]
+    assert [q / q0 for q in paper["surface"]["q1"]] == [32, 64, 128, 256]
+    assert sorted(paper["surface"]["grid"].values()) == [512, 1024, 2048, 4096]
+    assert paper["sweep"]["velocity"] == [0.01, 0.1, 1.0, 10.0]
+
+
+def test_paper_pressures_span_the_area_range():
+    """jobs/paper.yaml: the theory's A/A0 runs from about 0.5 % to about 60 % in every (q1, v)."""
+    from vecontact import cases as sweep
+    from vecontact.runner import spectra
+    from mpi4py import MPI
+    job = jobs.load(os.path.join(ROOT, "jobs", "paper.yaml"))
+    psds = spectra(job, MPI.COMM_SELF)
+    cs = sweep.expand(job, psds)
+    rows, _ = sweep.theory(job, psds, cs)
+    for q1 in job["surface"]["q1"]:
+        for v in job["sweep"]["velocity"]:
+            area = np.array([rows[c.key]["theory_area"] for c in cs if c.q1 == q1 and c.velocity == v])
+            assert len(area) == 12
+            assert area.min() == pytest.approx(0.005, rel=1e-3)
+            assert area.max() == pytest.approx(0.6, rel=1e-3)

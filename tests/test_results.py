@@ -1,0 +1,120 @@
+"""Results file: layout, provenance, atomic commits and refusals; theory-only jobs end to end."""
+import json
+import os
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from vecontact.errors import ResultsFileError
+from vecontact.io.results import CASE_DTYPE, ResultsFile, empty_row, read_cases
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _row(q1, seed, v, p, area):
+    r = empty_row()
+    r["q1"], r["seed"], r["velocity"], r["pressure"], r["theory_area"] = q1, seed, v, p, area
+    return r
+
+
+def test_commit_is_atomic_and_sorted(tmp_path):
+    path = str(tmp_path / "r.h5")
+    w = ResultsFile.open(path, "job: 1\n", "hash-a", 2)
+    w.add_row(_row(2.0, 1, 1.0, 5.0, 0.2))
+    w.add_row(_row(1.0, 1, 1.0, 5.0, 0.1))
+    w.commit()
+    assert [n for n in os.listdir(tmp_path)] == ["r.h5"]          # no temporary left behind
+    t = read_cases(path)
+    assert list(t["q1"]) == [1.0, 2.0] and list(t["theory_area"]) == [0.1, 0.2]
+    with h5py.File(path, "r") as f:
+        assert f.attrs["physics_hash"] == "hash-a" and f.attrs["nranks"] == 2
+        assert f.attrs["job_yaml"] == "job: 1\n" and not f.attrs["complete"]
+        units = json.loads(f["cases"].attrs["units"])
+        assert units["pressure"] == "Pa" and units["velocity"] == "m/s" and units["q1"] == "1/m"
+    # reopen for a restart: finished rows come back; a rewritten row does not duplicate
+    w2 = ResultsFile.open(path, "job: 1\n", "hash-a", 1)
+    assert w2.done() == {(1.0, 1, 1.0, 5.0), (2.0, 1, 1.0, 5.0)}
+    w2.add_row(_row(1.0, 1, 1.0, 5.0, 0.1))
+    w2.commit(complete=True)
+    assert len(read_cases(path)) == 2
+
+
+def test_reserved_columns_present():
+    for name in ("q1", "seed", "velocity", "pressure", "theory_area", "theory_mu", "xi", "area", "mu",
+                 "mu_geometric", "mean_gap", "converged", "iterations", "fft_pairs", "residual", "seconds"):
+        assert name in CASE_DTYPE.names
+
+
+def test_refusals(tmp_path):
+    path = str(tmp_path / "r.h5")
+    w = ResultsFile.open(path, "", "hash-a", 1)
+    w.commit()
+    with pytest.raises(ResultsFileError, match="different physics"):
+        ResultsFile.open(path, "", "hash-b", 1)
+    foreign = str(tmp_path / "foreign.h5")
+    with h5py.File(foreign, "w") as f:
+        f["x"] = np.arange(3)
+    with pytest.raises(ResultsFileError, match="not a vecontact results file"):
+        ResultsFile.open(foreign, "", "hash-a", 1)
+    truncated = str(tmp_path / "trunc.h5")
+    with open(path, "rb") as src, open(truncated, "wb") as dst:
+        dst.write(src.read()[:700])
+    with pytest.raises(ResultsFileError, match="cannot be read"):
+        ResultsFile.open(truncated, "", "hash-a", 1)
+    # nothing was overwritten
+    with h5py.File(foreign, "r") as f:
+        assert list(f) == ["x"]
+
+
+def _theory_job(tmp_path, **numerics):
+    job = yaml.safe_load(open(os.path.join(ROOT, "jobs", "demo.yaml")))
+    job["output"] = str(tmp_path / "demo.h5")
+    job["numerics"] = {"enabled": False, **numerics}
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    return str(path), job["output"]
+
+
+def test_theory_job_end_to_end_and_plot(tmp_path):
+    path, out = _theory_job(tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", path, "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    with h5py.File(out, "r") as f:
+        cases = f["cases"][()]
+        assert f.attrs["complete"] and f.attrs["format"] == "vecontact-results/1"
+        assert f.attrs["vecontact_version"] and f.attrs["git_commit"] and f.attrs["created"]
+        job = yaml.safe_load(f.attrs["job_yaml"])
+        assert job["sweep"]["velocity"] == [0.01, 1.0, 10.0]
+        g = f["theory/q1_0"]
+        assert g["P_q"].shape == (3, 4, g["q"].shape[0])
+        # P(q) decreases from 1 at q0 to the contact area at q1
+        P = g["P_q"][()]
+        assert np.all(np.diff(P, axis=-1) <= 1e-12)
+        assert np.allclose(P[..., -1], g["area"][()], rtol=1e-12)
+    assert len(cases) == 2 * 3 * 4                      # q1 x v x p
+    assert np.all(cases["status"] == 0) and np.all(np.isnan(cases["area"]))
+    # pressures were chosen so the theory spans the requested area range
+    for q1 in np.unique(cases["q1"]):
+        for v in np.unique(cases["velocity"]):
+            a = cases["theory_area"][(cases["q1"] == q1) & (cases["velocity"] == v)]
+            assert a.min() == pytest.approx(0.02, rel=1e-4) and a.max() == pytest.approx(0.4, rel=1e-4)
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "plot", out, "-o", str(tmp_path / "fig")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    for name in ("fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png"):
+        p = tmp_path / "fig" / name
+        assert p.stat().st_size > 10000
+        assert open(p, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_info_prints_stack():
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "info"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    for word in ("python", "numpy", "mpi4py", "MPI library", "PETSc", "FFTW", "ranks: 1"):
+        assert word in proc.stdout

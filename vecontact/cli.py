@@ -1,0 +1,135 @@
+"""The ``vecontact`` command line: run, surface, plot, info, test.
+
+Bad input gives one line ``vecontact: error: KEY: PROBLEM`` on stderr and exit status 2,
+without a traceback and without writing anything.
+"""
+import argparse
+import os
+import sys
+
+from vecontact import __version__
+from vecontact.errors import InputError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError("arguments", message)
+
+
+def _parser():
+    p = _Parser(prog="vecontact", description="Viscoelastic rough contact: Persson theory and exact solver")
+    p.add_argument("--version", action="version", version=f"vecontact {__version__}")
+    sub = p.add_subparsers(dest="command")
+    r = sub.add_parser("run", help="run a job (theory, and numerics if enabled)")
+    r.add_argument("job", help="YAML job file")
+    r.add_argument("--quiet", action="store_true", help="no per-case progress lines")
+    r.add_argument("-o", "--output", help="override the job's output file")
+    s = sub.add_parser("surface", help="write the job's generated surfaces without solving")
+    s.add_argument("job")
+    s.add_argument("-o", "--output", required=True, help="HDF5 file for the surfaces")
+    pl = sub.add_parser("plot", help="draw the paper's figures from a results file")
+    pl.add_argument("results", help="results HDF5 file")
+    pl.add_argument("-o", "--outdir", help="folder for the PNGs (default: next to the results)")
+    sub.add_parser("info", help="versions of the stack and the number of ranks")
+    t = sub.add_parser("test", help="run the test suite (serial part; ./run test adds the MPI part)")
+    t.add_argument("pytest_args", nargs=argparse.REMAINDER)
+    return p
+
+
+def _split_petsc(argv):
+    """Arguments after the job that look like PETSc options (-snes_type newtonls ...)."""
+    known, petsc, i = [], [], 0
+    ours = {"--quiet", "-o", "--output", "-h", "--help", "--version"}
+    while i < len(argv):
+        a = argv[i]
+        if a.startswith("-") and not a.startswith("--") and a not in ours and len(a) > 2:
+            petsc.append(a)
+            if i + 1 < len(argv) and not argv[i + 1].startswith("-"):
+                petsc.append(argv[i + 1])
+                i += 1
+        else:
+            known.append(a)
+        i += 1
+    return known, petsc
+
+
+def _info():
+    from mpi4py import MPI
+    import numpy
+    import pyfftw
+    import h5py
+    lines = [f"vecontact {__version__}", f"python {sys.version.split()[0]}", f"numpy {numpy.__version__}",
+             f"mpi4py {__import__('mpi4py').__version__}",
+             f"MPI library: {MPI.Get_library_version().splitlines()[0].strip()}",
+             f"h5py {h5py.__version__} (HDF5 {h5py.version.hdf5_version})",
+             f"pyfftw {pyfftw.__version__} (FFTW {_fftw_version()})"]
+    try:
+        from petsc4py import PETSc
+        v = PETSc.Sys.getVersion()
+        lines.append(f"petsc4py {__import__('petsc4py').__version__}, PETSc {'.'.join(map(str, v))}")
+    except ImportError as exc:
+        lines.append(f"PETSc: not importable ({exc})")
+    lines.append(f"ranks: {MPI.COMM_WORLD.size}")
+    if MPI.COMM_WORLD.rank == 0:
+        print("\n".join(lines))
+    return 0
+
+
+def _fftw_version():
+    try:
+        import ctypes
+        import pyfftw
+        lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
+        return ctypes.c_char_p.in_dll(lib, "fftw_version").value.decode()
+    except (OSError, ValueError, AttributeError):
+        return "version not exported"
+
+
+def _dispatch(argv):
+    known, petsc = _split_petsc(argv)
+    args = _parser().parse_args(known)
+    if args.command == "info":
+        return _info()
+    if args.command == "test":
+        import pytest
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        return pytest.main([os.path.join(root, "tests"), "--ignore", os.path.join(root, "tests", "mpi")]
+                           + args.pytest_args)
+    if args.command == "plot":
+        from vecontact.plot import plot_results
+        for path in plot_results(args.results, args.outdir):
+            print(path)
+        return 0
+    if args.command in ("run", "surface"):
+        from mpi4py import MPI
+        from vecontact import job as jobs
+        job = jobs.load(args.job, output=getattr(args, "output", None) if args.command == "run" else None)
+        if args.command == "surface":
+            from vecontact.io.surfaces import write_job_surfaces
+            write_job_surfaces(job, args.output, MPI.COMM_WORLD)
+            return 0
+        from vecontact.runner import run
+        run(job, MPI.COMM_WORLD, quiet=args.quiet, petsc_args=petsc)
+        if MPI.COMM_WORLD.rank == 0 and not args.quiet:
+            print(f"vecontact: plot with: vecontact plot {job['output']}")
+        return 0
+    _parser().print_help()
+    return 2
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        return _dispatch(argv)
+    except InputError as exc:
+        if _rank() == 0:
+            print(f"vecontact: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+def _rank():
+    if "mpi4py.MPI" in sys.modules:
+        return sys.modules["mpi4py.MPI"].COMM_WORLD.rank
+    return 0

@@ -1,0 +1,245 @@
+"""The results file: one HDF5 file per job, written by one rank, never half-written.
+
+Layout (see README, "Results file"):
+
+- root attributes: ``format``, ``vecontact_version``, ``git_commit``, ``job_yaml``,
+  ``physics_hash``, ``created``, ``updated``, ``nranks``, ``complete``;
+- ``/cases``: compound dataset, one row per finished (q1, seed, velocity, pressure) case,
+  sorted by those four columns; attribute ``units`` (JSON {column: unit}) and ``status_codes``;
+- ``/theory``: Persson's theory (``q``, ``P_q``, dense ``curves``) per q1;
+- ``/spectrum``: C(q) per q1 (Fig. 1);
+- ``/fields/<case>``: optional per-case fields, as external links to files in
+  ``<output>.fields/`` (each written atomically), so the main file stays small.
+
+Crash safety: every commit writes the whole (small) main file to ``<output>.tmp-<pid>``,
+fsyncs it and renames it over the old one (atomic on POSIX), then fsyncs the folder. A kill
+at any moment leaves either the previous or the new complete file.
+"""
+import json
+import os
+import subprocess
+import time
+
+import h5py
+import numpy as np
+
+from vecontact import __version__
+from vecontact.errors import ResultsFileError
+
+FORMAT = "vecontact-results/1"
+
+# (name, dtype, unit, description)
+COLUMNS = [
+    ("q1", "f8", "1/m", "large-wavevector roughness cut-off"),
+    ("seed", "i8", "", "surface realisation"),
+    ("velocity", "f8", "m/s", "sliding speed"),
+    ("pressure", "f8", "Pa", "nominal pressure sigma0"),
+    ("theory_area", "f8", "", "Persson A/A0 = P(q1)"),
+    ("theory_mu", "f8", "", "Persson viscoelastic friction coefficient"),
+    ("xi", "f8", "", "effective rms slope xi(v)"),
+    ("slope_rms", "f8", "", "rms slope <|grad h|^2>^1/2 of the spectrum"),
+    ("status", "i1", "", "1 converged, -1 not converged, 0 theory only"),
+    ("area", "f8", "", "numerical A/A0"),
+    ("mu", "f8", "", "numerical friction, dissipation estimate"),
+    ("mu_geometric", "f8", "", "numerical friction, <p dh/dx>/sigma0"),
+    ("mean_gap", "f8", "m", "mean interfacial gap"),
+    ("rigid_position", "f8", "m", "rigid-body position of the rubber"),
+    ("converged", "?", "", "numerical solve converged"),
+    ("iterations", "i8", "", "nonlinear iterations"),
+    ("linear_iterations", "i8", "", "Krylov iterations"),
+    ("fft_pairs", "f8", "", "FFT pairs, fine-grid equivalent"),
+    ("residual", "f8", "", "final scale-free residual"),
+    ("seconds", "f8", "s", "wall time of the solve"),
+    ("N", "i8", "", "grid points per side"),
+    ("ranks", "i8", "", "ranks that solved the case"),
+]
+CASE_DTYPE = np.dtype([(n, t) for n, t, _, _ in COLUMNS])
+KEY = ("q1", "seed", "velocity", "pressure")
+STATUS_CODES = "1: converged; -1: not converged (numerical columns are NOT results); 0: theory only"
+
+
+def empty_row():
+    """A row with numerical columns set to 'absent' (NaN / -1 / False)."""
+    row = np.zeros((), dtype=CASE_DTYPE)
+    for name, t, _, _ in COLUMNS:
+        if t == "f8":
+            row[name] = np.nan
+        elif t == "i8":
+            row[name] = -1
+    row["status"] = 0
+    row["converged"] = False
+    return row
+
+
+def case_key(row):
+    return (float(row["q1"]), int(row["seed"]), float(row["velocity"]), float(row["pressure"]))
+
+
+def git_commit():
+    here = os.path.dirname(os.path.abspath(__file__))
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
+                             text=True, timeout=5)
+        return out.stdout.strip() if out.returncode == 0 else "unknown (not a git checkout)"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown (git not available)"
+
+
+def _fsync_dir(path):
+    try:
+        fd = os.open(os.path.dirname(os.path.abspath(path)) or ".", os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def atomic_h5(path, fill):
+    """Write an HDF5 file atomically: ``fill(h5file)`` into a temporary, fsync, rename."""
+    tmp = f"{path}.tmp-{os.getpid()}"
+    try:
+        with h5py.File(tmp, "w") as f:
+            fill(f)
+            f.flush()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+class ResultsFile:
+    """Rank-0 writer of a job's results; holds the finished rows in memory.
+
+    ``ResultsFile.open(path, job_yaml, physics_hash, nranks)`` creates a new file or reopens
+    an existing one for a restart (refusing foreign, corrupted or changed-job files).
+    """
+
+    def __init__(self, path, job_yaml, physics_hash, nranks):
+        self.path = path
+        self.job_yaml = job_yaml
+        self.physics_hash = physics_hash
+        self.nranks = nranks
+        self.created = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        self.rows = {}          # case key -> row (numpy void)
+        self.groups = {}        # name -> {dataset name: array}, e.g. theory/spectrum
+        self.group_attrs = {}
+        self.field_links = {}   # case name -> relative file path
+        self.complete = False
+
+    # ---------------------------------------------------------------------------------------
+    @classmethod
+    def open(cls, path, job_yaml, physics_hash, nranks):
+        self = cls(path, job_yaml, physics_hash, nranks)
+        if os.path.exists(path):
+            self._load_existing()
+        return self
+
+    def _load_existing(self):
+        path = self.path
+        try:
+            with h5py.File(path, "r") as f:
+                fmt = f.attrs.get("format")
+                if fmt != FORMAT:
+                    raise ResultsFileError("output", f"{path} exists and is not a vecontact results "
+                                                     "file; refusing to overwrite it")
+                old_hash = f.attrs.get("physics_hash")
+                if old_hash != self.physics_hash:
+                    raise ResultsFileError("output", f"{path} was written by a job with different physics "
+                                                     "(changed job file?); use another output or remove it")
+                self.created = str(f.attrs.get("created", self.created))
+                if "cases" in f:
+                    for row in f["cases"][()].astype(CASE_DTYPE):
+                        self.rows[case_key(row)] = row
+                if "fields" in f:
+                    for name in f["fields"]:
+                        link = f["fields"].get(name, getlink=True)
+                        if isinstance(link, h5py.ExternalLink):
+                            self.field_links[name] = link.filename
+        except ResultsFileError:
+            raise
+        except Exception as exc:  # h5py raises OSError/KeyError/... for damaged files
+            raise ResultsFileError("output", f"{path} exists but cannot be read as HDF5 "
+                                             f"({type(exc).__name__}); refusing to overwrite it") from None
+
+    # ---------------------------------------------------------------------------------------
+    def done(self):
+        """Keys of the finished cases."""
+        return set(self.rows)
+
+    def set_group(self, name, datasets, attrs=None):
+        self.groups[name] = datasets
+        self.group_attrs[name] = attrs or {}
+
+    def add_row(self, row):
+        self.rows[case_key(row)] = np.array(row, dtype=CASE_DTYPE)[()]
+
+    def fields_dir(self):
+        return self.path + ".fields"
+
+    def add_fields(self, case_name, arrays, attrs):
+        """Write one case's fields to their own file (atomically); link it at next commit."""
+        os.makedirs(self.fields_dir(), exist_ok=True)
+        fname = os.path.join(self.fields_dir(), f"{case_name}.h5")
+
+        def fill(f):
+            for k, v in arrays.items():
+                f.create_dataset(k, data=v, compression="gzip", compression_opts=1, shuffle=True)
+            for k, v in attrs.items():
+                f.attrs[k] = v
+        atomic_h5(fname, fill)
+        self.field_links[case_name] = os.path.join(os.path.basename(self.fields_dir()), f"{case_name}.h5")
+
+    def table(self):
+        keys = sorted(self.rows)
+        return np.array([self.rows[k] for k in keys], dtype=CASE_DTYPE)
+
+    def commit(self, complete=False):
+        """Atomically (re)write the main file with everything finished so far."""
+        self.complete = complete
+        atomic_h5(self.path, self._fill)
+
+    def _fill(self, f):
+        f.attrs["format"] = FORMAT
+        f.attrs["vecontact_version"] = __version__
+        f.attrs["git_commit"] = git_commit()
+        f.attrs["job_yaml"] = self.job_yaml
+        f.attrs["physics_hash"] = self.physics_hash
+        f.attrs["created"] = self.created
+        f.attrs["updated"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        f.attrs["nranks"] = self.nranks
+        f.attrs["complete"] = self.complete
+        cases = f.create_dataset("cases", data=self.table(), maxshape=(None,))
+        cases.attrs["units"] = json.dumps({n: u for n, _, u, _ in COLUMNS})
+        cases.attrs["descriptions"] = json.dumps({n: d for n, _, _, d in COLUMNS})
+        cases.attrs["status_codes"] = STATUS_CODES
+        for name, datasets in self.groups.items():
+            g = f.require_group(name)
+            for k, v in self.group_attrs[name].items():
+                g.attrs[k] = v
+            _write_tree(g, datasets)
+        if self.field_links:
+            g = f.create_group("fields")
+            for name, rel in sorted(self.field_links.items()):
+                g[name] = h5py.ExternalLink(rel, "/")
+
+
+def _write_tree(group, tree):
+    """Write a nested dict of arrays / dicts; keys starting with '@' become attributes."""
+    for k, v in tree.items():
+        if k.startswith("@"):
+            group.attrs[k[1:]] = v
+        elif isinstance(v, dict):
+            _write_tree(group.require_group(k), v)
+        else:
+            group.create_dataset(k, data=np.asarray(v))
+
+
+def read_cases(path):
+    """The /cases table of a results file as a numpy structured array."""
+    with h5py.File(path, "r") as f:
+        return f["cases"][()]

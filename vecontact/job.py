@@ -1,0 +1,413 @@
+"""Job files: load a YAML job, validate it completely, and resolve defaults.
+
+Every problem raises :class:`vecontact.errors.InputError` naming the dotted key
+(``surface.q1``, ``sweep.pressure.num``...) before any work starts. The resolved job is a
+plain nested dict with every default filled in and every sweep axis expanded to a list, so
+that it can be stored as YAML provenance and hashed for restarts.
+
+Units are SI throughout: wavevectors in 1/m, lengths in m, moduli and pressures in Pa,
+times in s, velocities in m/s.
+"""
+import copy
+import hashlib
+import json
+import math
+import os
+
+import numpy as np
+import yaml
+
+from vecontact.errors import InputError
+
+MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
+FIELDS = ("pressure", "gap", "displacement", "contact")
+SOLVERS = ("snes", "pk")
+
+# Keys that do not change any number in the results: ignored by the restart hash.
+NON_PHYSICS = {("output",), ("numerics", "ranks_per_case"), ("numerics", "threads"),
+               ("numerics", "fields"), ("numerics", "downsample")}
+
+
+# --------------------------------------------------------------------------------------------
+# small typed readers
+def _number(d, key, path, *, default=None, required=True, lo=None, hi=None, lo_open=False,
+            hi_open=False, integer=False):
+    """Read a finite number d[key]; range [lo, hi] (open ends with lo_open/hi_open)."""
+    name = f"{path}.{key}" if path else key
+    if key not in d:
+        if default is not None or not required:
+            return default
+        raise InputError(name, "is required")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        if isinstance(v, str):
+            try:
+                v = float(v)  # YAML reads '1e4' (no dot) as a string
+            except ValueError:
+                raise InputError(name, f"must be a number, got {d[key]!r}") from None
+        else:
+            raise InputError(name, f"must be a number, got {type(v).__name__} {v!r}")
+    if not math.isfinite(v):
+        raise InputError(name, f"must be finite, got {v!r}")
+    if integer:
+        if float(v) != int(v):
+            raise InputError(name, f"must be an integer, got {v!r}")
+        v = int(v)
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise InputError(name, f"must be {'>' if lo_open else '>='} {lo:g}, got {v:g}")
+    if hi is not None and (v > hi or (hi_open and v == hi)):
+        raise InputError(name, f"must be {'<' if hi_open else '<='} {hi:g}, got {v:g}")
+    return v
+
+
+def _choice(d, key, path, choices, default=None):
+    name = f"{path}.{key}" if path else key
+    v = d.get(key, default)
+    if v is None:
+        raise InputError(name, f"is required (one of {', '.join(choices)})")
+    if not isinstance(v, str) or v not in choices:
+        raise InputError(name, f"must be one of {', '.join(choices)}, got {v!r}")
+    return v
+
+
+def _bool(d, key, path, default):
+    v = d.get(key, default)
+    if not isinstance(v, bool):
+        raise InputError(f"{path}.{key}", f"must be true or false, got {v!r}")
+    return v
+
+
+def _section(job, key, required=True):
+    if key not in job:
+        if required:
+            raise InputError(key, "section is required")
+        return {}
+    v = job[key]
+    if v is None:
+        return {}
+    if not isinstance(v, dict):
+        raise InputError(key, f"must be a mapping of keys, got {type(v).__name__}")
+    return v
+
+
+def _unknown(d, path, allowed):
+    for k in d:
+        if k not in allowed:
+            name = f"{path}.{k}" if path else str(k)
+            raise InputError(name, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _number_list(d, key, path, *, lo=None, lo_open=False, integer=False, default=None):
+    """A value or a non-empty list of values, each validated like :func:`_number`."""
+    name = f"{path}.{key}"
+    v = d.get(key, default)
+    if v is None:
+        raise InputError(name, "is required")
+    items = v if isinstance(v, list) else [v]
+    if not items:
+        raise InputError(name, "must not be empty")
+    out = []
+    for item in items:
+        out.append(_number({key: item}, key, path, lo=lo, lo_open=lo_open, integer=integer))
+    if len(set(out)) != len(out):
+        raise InputError(name, "contains duplicate values")
+    return out
+
+
+def _path(d, key, path, base, must_exist=True):
+    name = f"{path}.{key}"
+    v = d.get(key)
+    if not isinstance(v, str) or not v:
+        raise InputError(name, "must be a file path")
+    full = v if os.path.isabs(v) else os.path.normpath(os.path.join(base, v))
+    if must_exist and not os.path.isfile(full):
+        raise InputError(name, f"file not found: {full}")
+    return full
+
+
+# --------------------------------------------------------------------------------------------
+# sections
+def _surface(job, base):
+    s = _section(job, "surface")
+    p = "surface"
+    spectrum = _choice(s, "spectrum", p, ("self-affine", "file"), default="self-affine")
+    common = {"spectrum", "null_band", "seeds", "amplitudes"}
+    out = {"spectrum": spectrum}
+    out["amplitudes"] = _choice(s, "amplitudes", p, ("fixed", "gaussian"), default="fixed")
+    if spectrum == "file":
+        _unknown(s, p, common | {"file", "length", "dataset"})
+        out["file"] = _path(s, "file", p, base)
+        if not out["file"].endswith((".npy", ".h5", ".hdf5")):
+            raise InputError(f"{p}.file", "must be a .npy or .h5 file of N x N heights in m")
+        out["length"] = _number(s, "length", p, lo=0, lo_open=True)
+        out["dataset"] = s.get("dataset")
+        if out["dataset"] is not None and not isinstance(out["dataset"], str):
+            raise InputError(f"{p}.dataset", "must be an HDF5 dataset name")
+        out["seeds"] = [0]
+        out["null_band"] = None
+        return out
+    _unknown(s, p, common | {"q0", "qr", "q1", "hurst", "C0", "hrms"})
+    q0 = out["q0"] = _number(s, "q0", p, lo=0, lo_open=True)
+    qr = out["qr"] = _number(s, "qr", p, default=q0, lo=0, lo_open=True)
+    q1 = out["q1"] = sorted(_number_list(s, "q1", p, lo=0, lo_open=True))
+    out["hurst"] = _number(s, "hurst", p, lo=0, hi=1, lo_open=True, hi_open=True)
+    if qr < q0:
+        raise InputError(f"{p}.qr", f"must be >= q0 = {q0:g}, got {qr:g}")
+    for v in q1:
+        if v <= qr:
+            raise InputError(f"{p}.q1", f"every q1 must exceed qr = {qr:g}, got {v:g}")
+    if ("C0" in s) == ("hrms" in s):
+        raise InputError(f"{p}.C0", "give exactly one of C0 (m^4) or hrms (m)")
+    if "C0" in s:
+        out["C0"] = _number(s, "C0", p, lo=0, lo_open=True)
+    else:
+        out["hrms"] = _number(s, "hrms", p, lo=0, lo_open=True)
+    out["null_band"] = nb = _number(s, "null_band", p, default=8, lo=1)
+    out["seeds"] = _number_list(s, "seeds", p, lo=0, integer=True, default=[1])
+    out["grid"] = {}
+    for v in q1:
+        n_float = 2.0 * nb * v / q0
+        n = int(round(n_float))
+        if abs(n - n_float) > 1e-6 * n_float:
+            raise InputError(f"{p}.q1", f"grid size N = 2 null_band q1 / q0 = {n_float:.6g} "
+                                        f"is not an integer for q1 = {v:g}")
+        if n < 4:
+            raise InputError(f"{p}.q1", f"grid size N = {n} is too small (need N >= 4)")
+        out["grid"][repr(float(v))] = n
+    return out
+
+
+def _material(job, base):
+    m = _section(job, "material")
+    p = "material"
+    model = _choice(m, "model", p, MODELS)
+    out = {"model": model}
+    out["nu"] = _number(m, "nu", p, default=0.5, lo=-1, hi=0.5, lo_open=True)
+    keys = {"model", "nu"}
+    if model == "elastic":
+        keys |= {"E0"}
+        out["E0"] = _number(m, "E0", p, lo=0, lo_open=True)
+    elif model in ("sls", "havriliak-negami"):
+        keys |= {"E0", "Einf", "tau"}
+        out["E0"] = _number(m, "E0", p, lo=0, lo_open=True)
+        out["Einf"] = _number(m, "Einf", p, lo=0, lo_open=True)
+        out["tau"] = _number(m, "tau", p, lo=0, lo_open=True)
+        if out["Einf"] <= out["E0"]:
+            raise InputError(f"{p}.Einf", f"must exceed E0 = {out['E0']:g} (glassy > rubbery), "
+                                          f"got {out['Einf']:g}")
+        if model == "havriliak-negami":
+            keys |= {"alpha", "beta"}
+            out["alpha"] = _number(m, "alpha", p, lo=0, hi=1, lo_open=True)
+            out["beta"] = _number(m, "beta", p, lo=0, hi=1, lo_open=True)
+    elif model == "prony":
+        keys |= {"E0", "terms"}
+        out["E0"] = _number(m, "E0", p, lo=0, lo_open=True)
+        terms = m.get("terms")
+        if not isinstance(terms, list) or not terms:
+            raise InputError(f"{p}.terms", "must be a non-empty list of [dE, tau] pairs")
+        out["terms"] = []
+        for i, t in enumerate(terms):
+            if not isinstance(t, list) or len(t) != 2:
+                raise InputError(f"{p}.terms[{i}]", f"must be a pair [dE, tau], got {t!r}")
+            de = _number({"dE": t[0]}, "dE", f"{p}.terms[{i}]", lo=0, lo_open=True)
+            tau = _number({"tau": t[1]}, "tau", f"{p}.terms[{i}]", lo=0, lo_open=True)
+            out["terms"].append([de, tau])
+    else:  # table
+        keys |= {"file", "wlf"}
+        out["file"] = _path(m, "file", p, base)
+        wlf = m.get("wlf")
+        if wlf is not None:
+            if not isinstance(wlf, dict):
+                raise InputError(f"{p}.wlf", "must be a mapping with C1, C2, T_ref, T")
+            _unknown(wlf, f"{p}.wlf", {"C1", "C2", "T_ref", "T"})
+            w = {k: _number(wlf, k, f"{p}.wlf") for k in ("C1", "C2", "T_ref", "T")}
+            if w["C2"] + w["T"] - w["T_ref"] <= 0:
+                raise InputError(f"{p}.wlf.T", "C2 + T - T_ref must be > 0 (WLF diverges)")
+            out["wlf"] = w
+        else:
+            out["wlf"] = None
+    _unknown(m, p, keys)
+    if model == "table":
+        # Read the table now: a bad file is an input error, found before any work.
+        from vecontact.physics.modulus import Table
+        Table.from_file(out["file"], out["nu"], out["wlf"])
+    return out
+
+
+def _sweep(job):
+    s = _section(job, "sweep")
+    p = "sweep"
+    _unknown(s, p, {"velocity", "pressure"})
+    velocity = sorted(_number_list(s, "velocity", p, lo=0))
+    pr = s.get("pressure")
+    if isinstance(pr, dict) and ("area_min" in pr or "area_max" in pr):
+        # pressures chosen per (q1, v) from the theory so that A/A0 spans [area_min, area_max]
+        _unknown(pr, f"{p}.pressure", {"area_min", "area_max", "num"})
+        lo = _number(pr, "area_min", f"{p}.pressure", lo=0, hi=1, lo_open=True, hi_open=True)
+        hi = _number(pr, "area_max", f"{p}.pressure", lo=0, hi=1, lo_open=True, hi_open=True)
+        num = _number(pr, "num", f"{p}.pressure", lo=1, integer=True)
+        if hi < lo:
+            raise InputError(f"{p}.pressure.area_max", f"must be >= area_min = {lo:g}, got {hi:g}")
+        return {"velocity": [float(v) for v in velocity],
+                "pressure": {"area_min": lo, "area_max": hi, "num": num}}
+    if isinstance(pr, dict):
+        _unknown(pr, f"{p}.pressure", {"min", "max", "num"})
+        lo = _number(pr, "min", f"{p}.pressure", lo=0, lo_open=True)
+        hi = _number(pr, "max", f"{p}.pressure", lo=0, lo_open=True)
+        num = _number(pr, "num", f"{p}.pressure", lo=1, integer=True)
+        if hi < lo:
+            raise InputError(f"{p}.pressure.max", f"must be >= min = {lo:g}, got {hi:g}")
+        if num > 1 and hi == lo:
+            raise InputError(f"{p}.pressure.max", "equals min but num > 1")
+        pressure = [float(x) for x in np.geomspace(lo, hi, num)]
+    else:
+        pressure = sorted(_number_list(s, "pressure", p, lo=0, lo_open=True))
+    return {"velocity": [float(v) for v in velocity], "pressure": pressure}
+
+
+def _theory(job):
+    t = _section(job, "theory", required=False)
+    _unknown(t, "theory", {"gamma", "nq", "nphi"})
+    out = {"gamma": _number(t, "gamma", "theory", default=0.5, lo=0, hi=1)}
+    out["nq"] = _number(t, "nq", "theory", required=False, lo=16, integer=True)
+    out["nphi"] = _number(t, "nphi", "theory", required=False, lo=8, integer=True)
+    return out
+
+
+def _petsc(value):
+    """PETSc options as a dict {name-without-dash: value-string-or-None}."""
+    if value is None:
+        return {}
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, str)):
+        tokens = value.split() if isinstance(value, str) else [str(t) for t in value]
+        items, i = [], 0
+        while i < len(tokens):
+            tok = tokens[i]
+            if not tok.startswith("-"):
+                raise InputError("numerics.petsc", f"expected an option starting with '-', got {tok!r}")
+            if i + 1 < len(tokens) and not tokens[i + 1].startswith("-"):
+                items.append((tok, tokens[i + 1]))
+                i += 2
+            else:
+                items.append((tok, None))
+                i += 1
+    else:
+        raise InputError("numerics.petsc", "must be a mapping {option: value} or a list of options")
+    out = {}
+    for k, v in items:
+        k = str(k).lstrip("-")
+        if not k or " " in k:
+            raise InputError("numerics.petsc", f"bad option name {k!r}")
+        if isinstance(v, bool):
+            v = "true" if v else "false"
+        out[k] = None if v is None else str(v)
+    return out
+
+
+def _numerics(job, material):
+    n = _section(job, "numerics", required=False)
+    p = "numerics"
+    _unknown(n, p, {"enabled", "solver", "tolerance", "petsc", "fields", "downsample",
+                    "ranks_per_case", "coarse", "max_iterations", "threads"})
+    out = {"enabled": _bool(n, "enabled", p, False)}
+    out["solver"] = _choice(n, "solver", p, SOLVERS, default="snes")
+    if out["solver"] == "pk" and material["model"] != "elastic":
+        raise InputError(f"{p}.solver", "pk (Polonsky-Keer) is valid only for elastic materials: "
+                                        "the viscoelastic operator is not symmetric")
+    out["tolerance"] = _number(n, "tolerance", p, default=1e-8, lo=0, hi=1e-2, lo_open=True)
+    out["petsc"] = _petsc(n.get("petsc"))
+    fields = n.get("fields", [])
+    if isinstance(fields, str):
+        fields = [fields]
+    if not isinstance(fields, list):
+        raise InputError(f"{p}.fields", f"must be a list from {', '.join(FIELDS)}")
+    for f in fields:
+        if f not in FIELDS:
+            raise InputError(f"{p}.fields", f"unknown field {f!r} (allowed: {', '.join(FIELDS)})")
+    out["fields"] = list(dict.fromkeys(fields))
+    out["downsample"] = _number(n, "downsample", p, default=1, lo=1, integer=True)
+    rpc = n.get("ranks_per_case", "auto")
+    out["ranks_per_case"] = rpc if rpc == "auto" else _number(n, "ranks_per_case", p, lo=1, integer=True)
+    out["coarse"] = _bool(n, "coarse", p, True)
+    out["max_iterations"] = _number(n, "max_iterations", p, required=False, lo=1, integer=True)
+    out["threads"] = _number(n, "threads", p, default=1, lo=1, integer=True)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+def resolve(raw, base="."):
+    """Validate a parsed job (dict) and return the resolved job; ``base`` resolves relative paths."""
+    if not isinstance(raw, dict):
+        raise InputError("", "a job file must be a YAML mapping of sections")
+    _unknown(raw, "", {"output", "surface", "material", "sweep", "theory", "numerics"})
+    out = raw.get("output")
+    if not isinstance(out, str) or not out.strip():
+        raise InputError("output", "must be the path of the HDF5 file to write")
+    if not out.endswith((".h5", ".hdf5")):
+        raise InputError("output", f"must end in .h5 or .hdf5, got {out!r}")
+    job = {"output": out if os.path.isabs(out) else os.path.normpath(os.path.join(base, out))}
+    job["surface"] = _surface(raw, base)
+    job["material"] = _material(raw, base)
+    job["sweep"] = _sweep(raw)
+    job["theory"] = _theory(raw)
+    job["numerics"] = _numerics(raw, job["material"])
+    if job["surface"]["spectrum"] == "file" and job["surface"]["amplitudes"] != "fixed":
+        raise InputError("surface.amplitudes", "applies to generated surfaces only")
+    return job
+
+
+def load(path, output=None):
+    """Read and validate a job file. Relative paths inside it are relative to the job's folder."""
+    if not os.path.isfile(path):
+        raise InputError("job", f"file not found: {path}")
+    try:
+        with open(path) as f:
+            raw = yaml.safe_load(f)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise InputError("job", f"{path} is not valid YAML{where}") from None
+    if raw is None:
+        raise InputError("job", f"{path} is empty")
+    if output is not None and isinstance(raw, dict):
+        raw = dict(raw, output=output)
+    base = os.path.dirname(os.path.abspath(path))
+    # Outputs are relative to the working directory, like every command-line tool.
+    if isinstance(raw, dict) and isinstance(raw.get("output"), str):
+        raw = dict(raw, output=os.path.abspath(raw["output"]))
+    return resolve(raw, base)
+
+
+def physics_hash(job):
+    """SHA-256 of everything in the job that changes results (restart guard)."""
+    j = copy.deepcopy(job)
+    for key in NON_PHYSICS:
+        d = j
+        for k in key[:-1]:
+            d = d.get(k, {})
+        d.pop(key[-1], None)
+    if j["surface"].get("spectrum") == "file":
+        j["surface"]["file_sha256"] = _file_hash(j["surface"]["file"])
+    if j["material"].get("model") == "table":
+        j["material"]["file_sha256"] = _file_hash(j["material"]["file"])
+    text = json.dumps(j, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _file_hash(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def to_yaml(job):
+    return yaml.safe_dump(job, sort_keys=False, default_flow_style=None)
+
+
+def grid_size(job, q1):
+    """Grid points per side for a generated surface with large-wavevector cut-off q1 (1/m)."""
+    return job["surface"]["grid"][repr(float(q1))]

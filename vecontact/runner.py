@@ -1,0 +1,67 @@
+"""``vecontact run``: a job from validated YAML to a complete results file.
+
+Every rank validates the job and computes the (cheap) theory; rank 0 alone writes the file.
+With ``numerics.enabled`` the task farm (:mod:`vecontact.farm`) solves the cases.
+"""
+import sys
+
+from mpi4py import MPI
+
+from vecontact import cases as sweep
+from vecontact.errors import InputError
+from vecontact.io.results import ResultsFile
+from vecontact.job import physics_hash, to_yaml
+from vecontact.physics.spectrum import Tabulated
+
+
+def spectra(job, comm):
+    """q1 -> spectrum. A surface from a file brings its own radially averaged PSD."""
+    s = job["surface"]
+    if s["spectrum"] != "file":
+        return {float(q1): sweep.spectrum_for(job, q1) for q1 in s["q1"]}
+    from vecontact.core.surface import load
+    from vecontact.io.surfaces import file_grid_size
+    from vecontact.core.pfft import SlabFFT
+    n = file_grid_size(s["file"], s.get("dataset"))
+    fft = SlabFFT(comm, n)
+    h = load(fft, s["file"], s.get("dataset"))
+    q, C = fft.radial_psd(h, s["length"])
+    keep = C > 0
+    if keep.sum() < 2:
+        raise InputError("surface.file", "the surface is flat: its power spectrum is zero")
+    psd = Tabulated(q[keep], C[keep])
+    return {float(psd.q_max): psd}
+
+
+def open_results(job, comm):
+    """Rank 0 opens (or reopens for a restart) the results file; errors reach every rank."""
+    writer, err = None, None
+    if comm.rank == 0:
+        try:
+            writer = ResultsFile.open(job["output"], to_yaml(job), physics_hash(job), comm.size)
+        except InputError as exc:
+            err = exc
+    err = comm.bcast(err, root=0)
+    if err is not None:
+        raise err
+    return writer
+
+
+def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=()):
+    psds = spectra(job, comm)
+    cases = sweep.expand(job, psds)
+    rows, groups = sweep.theory(job, psds, cases)
+    writer = open_results(job, comm)
+    if writer is not None:
+        for name, (datasets, attrs) in groups.items():
+            writer.set_group(name, datasets, attrs)
+    if job["numerics"]["enabled"]:
+        from vecontact.farm import run_numerics
+        run_numerics(job, comm, writer, cases, rows, psds, quiet=quiet, petsc_args=petsc_args)
+    elif writer is not None:
+        for row in rows.values():
+            writer.add_row(row)
+        writer.commit(complete=True)
+    if comm.rank == 0 and not quiet:
+        print(f"vecontact: {len(cases)} cases written to {job['output']}", file=sys.stdout, flush=True)
+    return len(cases)
