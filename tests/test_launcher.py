@@ -1,0 +1,58 @@
+"""The ./run launcher: -n starts mpiexec, inside an MPI launch it does not start another one."""
+import os
+import subprocess
+
+import h5py
+import numpy as np
+import yaml
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RUN = os.path.join(ROOT, "run")
+
+
+def _run(args, env=None, timeout=300):
+    e = dict(os.environ)
+    for k in ("PMI_RANK", "PMI_SIZE", "PMIX_RANK", "OMPI_COMM_WORLD_SIZE", "MPI_LOCALRANKID", "SLURM_STEP_ID"):
+        e.pop(k, None)
+    e.update(env or {})
+    return subprocess.run([RUN] + args, capture_output=True, text=True, timeout=timeout, env=e)
+
+
+def test_info_on_two_ranks():
+    proc = _run(["-n", "2", "info"])
+    assert proc.returncode == 0, proc.stderr
+    assert "ranks: 2" in proc.stdout and "PETSc" in proc.stdout
+    assert proc.stdout.count("ranks:") == 1          # printed by rank 0 only
+
+
+def test_inside_mpi_launch_runs_directly():
+    # Pretend to be one rank of an outer launch: ./run must not start mpiexec again.
+    proc = _run(["-n", "2", "info"], env={"PMI_RANK": "0", "PMI_SIZE": "1"})
+    assert proc.returncode == 0, proc.stderr
+    assert "ranks: 1" in proc.stdout
+
+
+def test_bad_rank_count():
+    proc = _run(["-n", "zero", "info"])
+    assert proc.returncode != 0 and "-n needs a positive number" in proc.stderr
+
+
+def test_surface_command_three_ranks_matches_one(tmp_path):
+    job = yaml.safe_load(open(os.path.join(ROOT, "jobs", "demo.yaml")))
+    job["surface"].update(q1=[2.0e6], null_band=4, seeds=[3, 4])    # N = 64, uneven on 3 ranks
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    outs = []
+    for n in (1, 3):
+        out = str(tmp_path / f"s{n}.h5")
+        proc = _run(["-n", str(n), "surface", str(path), "-o", out])
+        assert proc.returncode == 0, proc.stderr
+        outs.append(out)
+    with h5py.File(outs[0], "r") as a, h5py.File(outs[1], "r") as b:
+        assert sorted(a) == sorted(b) and len(a) == 2
+        for name in a:
+            assert a[name].shape == (64, 64)
+            assert np.array_equal(a[name][()], b[name][()])               # bit for bit
+            assert a[name].attrs["hrms"] == b[name].attrs["hrms"]
+            # random phases: the grid's h_rms equals the lattice sum of the spectrum
+            assert np.sqrt(np.mean(a[name][()] ** 2)) == np.float64(a[name].attrs["hrms"])

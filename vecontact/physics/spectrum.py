@@ -1,0 +1,161 @@
+"""Isotropic roughness power spectra C(q) in Persson's convention (CONVENTIONS.md section 2).
+
+C(q) = (2 pi)^-2 Int d^2x <h(x) h(0)> exp(-i q.x), in m^4, with q = |q| in 1/m, so that
+h_rms^2 = 2 pi Int q C(q) dq and the (full 2-D) mean-square slope is
+<|grad h|^2> = 2 pi Int q^3 C(q) dq. Both spectra here expose
+
+* ``__call__(q)`` (vectorised), ``moment(n)`` = 2 pi Int q^(n+1) C(q) dq,
+  ``hrms2()`` = moment(0), ``hrms()``, ``slope2()`` = moment(2);
+* ``q_min``, ``q_max`` (the support) and ``breakpoints`` (the kinks of C, including the support
+  ends, so that quadratures can be split into smooth pieces).
+"""
+import math
+
+import numpy as np
+
+__all__ = ["SelfAffine", "Tabulated"]
+
+
+def _power_integral(a, b, e):
+    """Int_a^b q^e dq for 0 < a <= b (exact, including e = -1)."""
+    if a >= b:
+        return 0.0
+    if abs(e + 1.0) < 1e-12:
+        return math.log(b / a)
+    return (b ** (e + 1.0) - a ** (e + 1.0)) / (e + 1.0)
+
+
+class _Spectrum:
+    """Common derived quantities; subclasses provide ``moment`` and ``__call__``."""
+
+    def hrms2(self):
+        """Mean-square height h_rms^2 = 2 pi Int q C dq (m^2)."""
+        return self.moment(0)
+
+    def hrms(self):
+        """Root-mean-square height (m)."""
+        return math.sqrt(self.hrms2())
+
+    def slope2(self):
+        """Mean-square slope <|grad h|^2> = 2 pi Int q^3 C dq (full 2-D gradient, dimensionless)."""
+        return self.moment(2)
+
+
+class SelfAffine(_Spectrum):
+    """Self-affine spectrum with roll-off (the paper's surfaces).
+
+    C(q) = C0 for q0 <= q <= qr, C0 (q / qr)^(-2 (1 + H)) for qr < q <= q1, 0 elsewhere.
+    q0, qr, q1 in 1/m with q0 <= qr <= q1 (qr == q0: no roll-off), Hurst exponent H, C0 in m^4.
+    """
+
+    def __init__(self, q0, qr, q1, hurst, C0):
+        self.q0, self.qr, self.q1 = float(q0), float(qr), float(q1)
+        self.hurst = float(hurst)
+        self.C0 = float(C0)
+        if not (0 < self.q0 <= self.qr <= self.q1):
+            raise ValueError("need 0 < q0 <= qr <= q1")
+        if self.q0 == self.q1:
+            raise ValueError("need q0 < q1")
+
+    @classmethod
+    def from_hrms(cls, q0, qr, q1, hurst, hrms):
+        """The spectrum whose C0 gives the rms height ``hrms`` (m)."""
+        unit = cls(q0, qr, q1, hurst, 1.0)
+        return cls(q0, qr, q1, hurst, float(hrms) ** 2 / unit.hrms2())
+
+    @property
+    def exponent(self):
+        """Power-law exponent of the self-affine tail, C ~ q^exponent = q^(-2 (1 + H))."""
+        return -2.0 * (1.0 + self.hurst)
+
+    @property
+    def q_min(self):
+        return self.q0
+
+    @property
+    def q_max(self):
+        return self.q1
+
+    @property
+    def breakpoints(self):
+        """Kinks of C(q): [q0, qr, q1] ([q0, q1] without roll-off)."""
+        kinks = [self.q0]
+        for q in (self.qr, self.q1):
+            if q > kinks[-1]:
+                kinks.append(q)
+        return kinks
+
+    def __call__(self, q):
+        q = np.asarray(q, dtype=float)
+        with np.errstate(divide="ignore"):
+            tail = self.C0 * (np.maximum(q, self.qr) / self.qr) ** self.exponent
+        inside = (q >= self.q0) & (q <= self.q1)
+        return np.where(inside, np.where(q <= self.qr, self.C0, tail), 0.0)
+
+    def moment(self, n):
+        """2 pi Int q^(n+1) C(q) dq in closed form (m^(2-n))."""
+        flat = _power_integral(self.q0, self.qr, n + 1.0)
+        tail = self.qr ** (-self.exponent) * _power_integral(self.qr, self.q1, n + 1.0 + self.exponent)
+        return 2.0 * math.pi * self.C0 * (flat + tail)
+
+    def describe(self):
+        return (f"self-affine: q0 = {self.q0:.4g}, qr = {self.qr:.4g}, q1 = {self.q1:.4g} 1/m, "
+                f"H = {self.hurst:g}, C0 = {self.C0:.5g} m^4, h_rms = {self.hrms() * 1e9:.4g} nm, "
+                f"rms slope = {math.sqrt(self.slope2()):.4g}")
+
+
+class Tabulated(_Spectrum):
+    """PSD given on samples (q_k, C_k), e.g. the radial average of a measured surface.
+
+    q strictly increasing and positive (1/m), C positive (m^4). Between samples C is interpolated
+    linearly in (log q, log C), i.e. as a power law; C = 0 outside [q[0], q[-1]]. Moments are the
+    exact integrals of that piecewise power law, so they are consistent with ``__call__``.
+    """
+
+    def __init__(self, q, C):
+        self.q = np.asarray(q, dtype=float).ravel()
+        self.C = np.asarray(C, dtype=float).ravel()
+        if self.q.size < 2 or self.q.shape != self.C.shape:
+            raise ValueError("q and C must be 1-D arrays of equal length >= 2")
+        if np.any(self.q <= 0) or np.any(np.diff(self.q) <= 0):
+            raise ValueError("q must be positive and strictly increasing")
+        if np.any(self.C <= 0):
+            raise ValueError("C must be positive (log-log interpolation)")
+        self._log_q = np.log(self.q)
+        self._log_C = np.log(self.C)
+        # Local power-law exponents C ~ q^slope on each interval.
+        self._slopes = np.diff(self._log_C) / np.diff(self._log_q)
+
+    @property
+    def q_min(self):
+        return float(self.q[0])
+
+    @property
+    def q_max(self):
+        return float(self.q[-1])
+
+    @property
+    def breakpoints(self):
+        """Every sample is a kink of the log-log interpolant."""
+        return [float(x) for x in self.q]
+
+    def __call__(self, q):
+        q = np.asarray(q, dtype=float)
+        inside = (q >= self.q[0]) & (q <= self.q[-1])
+        log_q = np.log(np.clip(q, self.q[0], self.q[-1]))
+        return np.where(inside, np.exp(np.interp(log_q, self._log_q, self._log_C)), 0.0)
+
+    def moment(self, n):
+        """2 pi Int q^(n+1) C(q) dq, exact for the piecewise power law (m^(2-n))."""
+        a, b = self.q[:-1], self.q[1:]
+        e = n + 1.0 + self._slopes           # integrand q^(n+1) C_a (q/a)^slope ~ q^e
+        ratio = b / a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            generic = a ** (n + 2.0) * self.C[:-1] * np.expm1((e + 1.0) * np.log(ratio)) / (e + 1.0)
+        logarithmic = a ** (n + 2.0) * self.C[:-1] * np.log(ratio)
+        pieces = np.where(np.abs(e + 1.0) < 1e-12, logarithmic, generic)
+        return 2.0 * math.pi * float(pieces.sum())
+
+    def describe(self):
+        return (f"tabulated PSD: {self.q.size} samples, q {self.q[0]:.4g}..{self.q[-1]:.4g} 1/m, "
+                f"h_rms = {self.hrms() * 1e9:.4g} nm, rms slope = {math.sqrt(self.slope2()):.4g}")
