@@ -80,7 +80,8 @@ def _fftw_version():
         import ctypes
         import pyfftw
         lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
-        return ctypes.c_char_p.in_dll(lib, "fftw_version").value.decode()
+        # fftw_version is a char array (not a pointer) in libfftw3
+        return (ctypes.c_char * 64).in_dll(lib, "fftw_version").value.decode()
     except (OSError, ValueError, AttributeError):
         return "version not exported"
 
