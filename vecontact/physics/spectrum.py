@@ -25,6 +25,9 @@ def _power_integral(a, b, e):
     return (b ** (e + 1.0) - a ** (e + 1.0)) / (e + 1.0)
 
 
+#: Relative tolerance on the band edges q0 and q1 (see SelfAffine.__call__).
+EDGE_RTOL = 1e-9
+
 class _Spectrum:
     """Common derived quantities; subclasses provide ``moment`` and ``__call__``."""
 
@@ -89,7 +92,9 @@ class SelfAffine(_Spectrum):
         q = np.asarray(q, dtype=float)
         with np.errstate(divide="ignore"):
             tail = self.C0 * (np.maximum(q, self.qr) / self.qr) ** self.exponent
-        inside = (q >= self.q0) & (q <= self.q1)
+        # Band edges with a relative slack of EDGE_RTOL: lattice wavevectors k 2 pi / L on the
+        # edge circles differ from k q0 by rounding and must not drop out at random.
+        inside = (q >= self.q0 * (1 - EDGE_RTOL)) & (q <= self.q1 * (1 + EDGE_RTOL))
         return np.where(inside, np.where(q <= self.qr, self.C0, tail), 0.0)
 
     def moment(self, n):

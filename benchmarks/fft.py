@@ -1,0 +1,186 @@
+"""Benchmark of the distributed FFT (vecontact.core.pfft.SlabFFT).
+
+Usage (from the repository root):  python benchmarks/fft.py [--sizes 1024,2048,4096] [--planner measure]
+
+Starts its own MPI runs (mpiexec -n 1 and -n 2 of this file with --worker) and times
+forward+backward pairs of SlabFFT (median over repeats; per repeat the slowest rank counts) next to a
+raw single-process pyfftw rfft2/irfft2 pair (pyfftw.builders, same planner flag, threads=1).
+A separate fresh 2-rank run does one forward+backward pair at the largest N and reports the peak RSS
+per rank (resource.getrusage ru_maxrss).  Prints a table; the LAST line is one JSON object:
+{"overhead": t_1rank / t_raw at N=2048, "speedup": t_1rank / t_2rank at N=2048, ...}.
+"""
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+
+def _median(xs):
+    xs = sorted(xs)
+    n = len(xs)
+    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
+
+
+def _repeats(t_one, budget):
+    return int(max(5, min(200, budget / max(t_one, 1e-6))))
+
+
+def worker(args):
+    import numpy as np
+    from mpi4py import MPI
+    import pyfftw
+    import pyfftw.builders as builders
+    from vecontact.core.pfft import SlabFFT
+
+    comm = MPI.COMM_WORLD
+    flag = {"estimate": "FFTW_ESTIMATE", "measure": "FFTW_MEASURE", "patient": "FFTW_PATIENT"}[args.planner]
+    out = {"size": comm.size, "results": []}
+    if args.mem:
+        N = args.mem
+        t0 = time.perf_counter()
+        fft = SlabFFT(comm, N, threads=1, planner=args.planner)
+        tplan = time.perf_counter() - t0
+        x = fft.real_array()
+        x[...] = np.random.default_rng(comm.rank).standard_normal(x.shape)
+        F = fft.fourier_array()
+        y = fft.real_array()
+        fft.forward(x, F)
+        fft.backward(F, y)
+        rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9  # kB on Linux
+        rss = comm.gather(rss_gb, root=0)
+        if comm.rank == 0:
+            out.update(mem_N=N, rss_gb=rss, plan_s=tplan)
+            print("RESULT " + json.dumps(out), flush=True)
+        return
+    for N in args.sizes:
+        rec = {"N": N}
+        t0 = time.perf_counter()
+        fft = SlabFFT(comm, N, threads=1, planner=args.planner)
+        rec["plan_s"] = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+        x = fft.real_array()
+        x[...] = np.random.default_rng(comm.rank).standard_normal(x.shape)
+        F = fft.fourier_array()
+        y = fft.real_array()
+        raw = None
+        if args.raw:  # single process only: raw pyfftw pair, interleaved with the SlabFFT pair
+            a = pyfftw.empty_aligned((N, N), dtype="float64")
+            a[...] = x
+            fwd = builders.rfft2(a, planner_effort=flag, threads=1)
+            bwd = builders.irfft2(fwd.output_array, s=(N, N), planner_effort=flag, threads=1)
+            a[...] = x
+
+            def raw():
+                bwd(fwd(a))
+
+        comm.Barrier()
+        t0 = time.perf_counter()
+        fft.forward(x, F)
+        fft.backward(F, y)
+        t1 = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+        nrep = _repeats(t1 * (2 if raw else 1), args.budget)
+        ts, tr = [], []
+        for _ in range(nrep):
+            if raw:
+                t0 = time.perf_counter()
+                raw()
+                tr.append(time.perf_counter() - t0)
+            comm.Barrier()
+            t0 = time.perf_counter()
+            fft.forward(x, F)
+            fft.backward(F, y)
+            ts.append(time.perf_counter() - t0)
+        ts = np.array(ts)
+        tmax = np.empty_like(ts)
+        comm.Allreduce(ts, tmax, op=MPI.MAX)
+        rec["slab"] = _median(list(tmax))
+        rec["slab_min"] = float(tmax.min())
+        if raw:
+            rec["raw"] = _median(tr)
+            rec["raw_min"] = min(tr)
+        rec["repeats"] = nrep
+        err = comm.allreduce(float(np.abs(y - x).max()), op=MPI.MAX)
+        rec["roundtrip_err"] = err
+        out["results"].append(rec)
+        fft.free()
+        del fft, x, F, y
+    if comm.rank == 0:
+        print("RESULT " + json.dumps(out), flush=True)
+
+
+def launch(n, extra):
+    sys.path.insert(0, os.path.join(ROOT, "tests"))
+    from mpi_util import run_mpi  # noqa: E402
+
+    env = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    proc = run_mpi(n, [os.path.abspath(__file__), "--worker"] + extra, timeout=3600, env=env)
+    for line in proc.stdout.splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line[7:])
+    raise RuntimeError(proc.stdout + proc.stderr)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="1024,2048,4096")
+    ap.add_argument("--planner", default="measure", choices=["estimate", "measure", "patient"])
+    ap.add_argument("--budget", type=float, default=3.0, help="seconds of timing per case")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--raw", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--mem", type=int, default=0, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    args.sizes = [int(s) for s in args.sizes.split(",") if s]
+    if args.worker:
+        try:
+            return worker(args)
+        except BaseException:
+            import traceback
+            from mpi4py import MPI
+            traceback.print_exc()
+            sys.stderr.flush()
+            MPI.COMM_WORLD.Abort(1)
+
+    common = ["--sizes", ",".join(map(str, args.sizes)), "--planner", args.planner, "--budget", str(args.budget)]
+    r1 = launch(1, common + ["--raw"])
+    r2 = launch(2, common)
+    Nmem = max(args.sizes)
+    m2 = launch(2, ["--mem", str(Nmem), "--planner", args.planner])
+    m1 = launch(1, ["--mem", str(Nmem), "--planner", args.planner])
+
+    by1 = {r["N"]: r for r in r1["results"]}
+    by2 = {r["N"]: r for r in r2["results"]}
+    print(f"SlabFFT forward+backward pair, planner={args.planner}, threads=1 per rank, median times")
+    hdr = f"{'N':>6} {'raw pyfftw [ms]':>16} {'1 rank [ms]':>12} {'2 ranks [ms]':>13} {'overhead':>9} {'speedup':>8} {'reps(1/2)':>10}"
+    print(hdr)
+    print("-" * len(hdr))
+    for N in args.sizes:
+        a, b = by1[N], by2[N]
+        print(f"{N:>6} {a['raw'] * 1e3:>16.2f} {a['slab'] * 1e3:>12.2f} {b['slab'] * 1e3:>13.2f} "
+              f"{a['slab'] / a['raw']:>9.3f} {a['slab'] / b['slab']:>8.3f} {a['repeats']:>5}/{b['repeats']:<4}")
+    print(f"peak RSS per rank, one pair at N={Nmem}: 2 ranks {', '.join(f'{g:.3f}' for g in m2['rss_gb'])} GB; "
+          f"1 rank {m1['rss_gb'][0]:.3f} GB")
+    Nref = 2048 if 2048 in by1 else args.sizes[0]
+    res = {
+        "overhead": round(by1[Nref]["slab"] / by1[Nref]["raw"], 4),
+        "speedup": round(by1[Nref]["slab"] / by2[Nref]["slab"], 4),
+        "N_ref": Nref,
+        "planner": args.planner,
+    }
+    for N in args.sizes:
+        res[f"t_raw_ms_{N}"] = round(by1[N]["raw"] * 1e3, 3)
+        res[f"t_1rank_ms_{N}"] = round(by1[N]["slab"] * 1e3, 3)
+        res[f"t_2rank_ms_{N}"] = round(by2[N]["slab"] * 1e3, 3)
+        res[f"overhead_{N}"] = round(by1[N]["slab"] / by1[N]["raw"], 4)
+        res[f"speedup_{N}"] = round(by1[N]["slab"] / by2[N]["slab"], 4)
+    res[f"mem_gb_{Nmem}_2ranks"] = round(max(m2["rss_gb"]), 4)
+    res[f"mem_gb_{Nmem}_1rank"] = round(m1["rss_gb"][0], 4)
+    print(json.dumps(res))
+
+
+if __name__ == "__main__":
+    main()
