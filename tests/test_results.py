@@ -84,6 +84,7 @@ def test_theory_job_end_to_end_and_plot(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "vecontact", "run", path, "--quiet"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
+    assert sorted(os.listdir(tmp_path / "demo_figures"))[0] == "fig1_spectrum.png"   # run draws them
     with h5py.File(out, "r") as f:
         cases = f["cases"][()]
         assert f.attrs["complete"] and f.attrs["format"] == "vecontact-results/1"

@@ -24,6 +24,7 @@ def _parser():
     r.add_argument("job", help="YAML job file")
     r.add_argument("--quiet", action="store_true", help="no per-case progress lines")
     r.add_argument("-o", "--output", help="override the job's output file")
+    r.add_argument("--no-plot", action="store_true", help="do not draw the figures at the end")
     s = sub.add_parser("surface", help="write the job's generated surfaces without solving")
     s.add_argument("job")
     s.add_argument("-o", "--output", required=True, help="HDF5 file for the surfaces")
@@ -39,7 +40,7 @@ def _parser():
 def _split_petsc(argv):
     """Arguments after the job that look like PETSc options (-snes_type newtonls ...)."""
     known, petsc, i = [], [], 0
-    ours = {"--quiet", "-o", "--output", "-h", "--help", "--version"}
+    ours = {"--quiet", "--no-plot", "-o", "--output", "-h", "--help", "--version"}
     while i < len(argv):
         a = argv[i]
         if a.startswith("-") and not a.startswith("--") and a not in ours and len(a) > 2:
@@ -111,8 +112,11 @@ def _dispatch(argv):
             return 0
         from vecontact.runner import run
         run(job, MPI.COMM_WORLD, quiet=args.quiet, petsc_args=petsc)
-        if MPI.COMM_WORLD.rank == 0 and not args.quiet:
-            print(f"vecontact: plot with: vecontact plot {job['output']}")
+        if MPI.COMM_WORLD.rank == 0 and not args.no_plot:
+            from vecontact.plot import plot_results
+            paths = plot_results(job["output"])
+            if not args.quiet:
+                print(f"vecontact: figures in {os.path.dirname(paths[0])}")
         return 0
     _parser().print_help()
     return 2
