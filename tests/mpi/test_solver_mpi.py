@@ -1,0 +1,99 @@
+"""Collective validation of the contact solver: run as ``mpiexec -n 2 python -m pytest tests/mpi``.
+
+Every rank holds the full reference (cheap at these sizes) and its rows of the problem; results are
+gathered and compared on every rank, and the scalars must be identical on all ranks.
+Tolerances as in tests/test_solver_dense.py and tests/test_solver_analytic.py (justified there).
+"""
+import math
+
+import numpy as np
+import pytest
+
+from reference import analytic as an
+from reference.cases import L_PAPER, NU, Q0, assert_contact_solution, make_fft, small_spectrum, solve_full
+from reference.dense import dense_solve, dense_solve_1d, random_surface
+
+from vecontact.physics.modulus import Elastic, HavriliakNegami
+
+
+def hn():
+    return HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+
+
+def same_on_all_ranks(comm, res):
+    vals = np.array([res.area, res.mu, res.mu_geometric, res.mean_gap, float(res.converged), res.residual])
+    allv = comm.allgather(vals)
+    assert all(np.array_equal(vals, a) for a in allv), allv
+
+
+@pytest.mark.parametrize("N,name,v,sigma0", [(24, "hn", 30.0, 1e5), (32, "hn", 1.0, 2e4), (32, "elastic", 0.0, 5e3)])
+def test_dense_collective(comm, N, name, v, sigma0):
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=N)
+    mod = hn() if name == "hn" else Elastic(3e6, NU)
+    ref = dense_solve(h, L_PAPER, mod, v, sigma0)
+    assert 0.05 < ref.area < 0.6 and ref.n_degenerate == 0
+    methods = ["snes", "pk"] if name == "elastic" else ["snes"]
+    for method in methods:
+        res, f = solve_full(h, L_PAPER, mod, v, sigma0, comm=comm, method=method)
+        same_on_all_ranks(comm, res)
+        assert_contact_solution(res, f, h, sigma0)
+        hrms = float(np.std(h))
+        assert abs(res.area - ref.area) * N * N <= 1, (method, res.area, ref.area)
+        assert np.abs(f["pressure"] - ref.pressure).max() <= 1e-6 * sigma0
+        assert np.abs(f["gap"] - ref.gap).max() <= 1e-6 * hrms
+        assert abs(res.mean_gap - ref.mean_gap) <= 1e-6 * hrms
+        if name == "hn":
+            assert abs(res.mu / ref.mu - 1) <= 1e-5, (res.mu, ref.mu)
+            assert abs(res.mu_geometric / ref.mu_geometric - 1) <= 1e-5, (res.mu_geometric, ref.mu_geometric)
+
+
+@pytest.mark.parametrize("method", ["snes", "pk"])
+def test_westergaard_collective(comm, method):
+    N, D = 128, 1e-8
+    x = np.arange(N) * L_PAPER / N
+    hx = D * np.cos(2 * math.pi * x / L_PAPER)
+    h = hx[:, None] * np.ones((1, N))
+    ps = an.westergaard_pstar(3e6, NU, D, L_PAPER)
+    r = 0.3
+    ref = dense_solve_1d(hx, L_PAPER, Elastic(3e6, NU), 0.0, r * ps)
+    res, f = solve_full(h, L_PAPER, Elastic(3e6, NU), 0.0, r * ps, comm=comm, method=method)
+    same_on_all_ranks(comm, res)
+    assert_contact_solution(res, f, h, r * ps)
+    assert abs(res.area - an.westergaard_area(r)) <= 2.0 / N
+    assert res.area == ref.area
+    assert np.abs(f["pressure"] - ref.pressure[:, None]).max() <= 1e-6 * r * ps
+    assert abs(res.mean_gap / an.westergaard_mean_gap(D, r) - 1) <= 1e-3
+
+
+def test_full_contact_cosine_collective(comm):
+    N, h0, m, v = 32, 1e-8, 3, 36.0
+    k = 2 * math.pi * m / L_PAPER
+    x = np.arange(N) * L_PAPER / N
+    h = h0 * np.cos(k * x)[:, None] * np.ones((1, N))
+    mod = hn()
+    Ek = complex(mod(np.array([k * v]))[0])
+    sigma0 = 2 * k * abs(Ek) / (2 * (1 - NU ** 2)) * h0
+    res, f = solve_full(h, L_PAPER, mod, v, sigma0, comm=comm)
+    same_on_all_ranks(comm, res)
+    assert res.area == 1.0
+    mu = an.cosine_mu(k, h0, mod, NU, v, sigma0)
+    assert abs(res.mu / mu - 1) <= 1e-6 and abs(res.mu_geometric / mu - 1) <= 1e-6
+    P = np.fft.fft2(f["pressure"]) / N ** 2
+    assert abs(np.angle(P[m, 0]) - an.cosine_phase(k, mod, v)) <= 1e-6
+
+
+@pytest.mark.slow
+def test_mu_vs_mu_geometric_paper_512_collective(comm):
+    """Paper's smallest case (q1 = 32 q0, N = 512, null band 8) on 2 ranks: mu_geometric = mu within 2%."""
+    from vecontact.core.surface import generate
+    from vecontact.physics.spectrum import SelfAffine
+    N = 512
+    fft = make_fft(comm, N)
+    psd = SelfAffine(Q0, 4 * Q0, 32 * Q0, 0.8, 1.0616e-28)
+    h_local = generate(fft, L_PAPER, psd, 1)
+    from vecontact.solver import solve_contact
+    res = solve_contact(fft, L_PAPER, h_local, hn(), 1.0, 1e4)   # A/A0 = 1.2%
+    same_on_all_ranks(comm, res)
+    assert res.converged
+    assert res.area >= 0.01 and res.mu > 1e-3, (res.area, res.mu)
+    assert abs(res.mu_geometric / res.mu - 1) <= 0.02, (res.area, res.mu, res.mu_geometric)

@@ -1,0 +1,184 @@
+"""``solve_contact``: the entry point of the exact numerical solver (see package docstring)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from vecontact.solver.operator import ContactOperator, is_elastic_on_grid
+from vecontact.solver.pk import pk_solve
+from vecontact.solver.result import ContactResult, pair_weight, postprocess
+from vecontact.solver.warmstart import (bearing_guess, coarse_fft, coarse_levels, fourier_transfer,
+                                        prolong_gap, smooth_gap)
+
+__all__ = ["solve_contact"]
+
+_METHODS = ("snes", "pk")
+_STORE = ("pressure", "gap", "displacement")
+
+# coarse-grid settings (see warmstart.py): coarsest grid >= COARSE_MIN_N, at most COARSE_LEVELS levels
+COARSE_MIN_N = 128
+COARSE_LEVELS = 3
+COARSE_TOL = 1e-4
+LIN_RTOL = 0.1          # KSP rtol of Newton steps whose active set changed
+COARSE_MAX_IT = 50
+SMOOTH_SWEEPS = 4       # projected-Jacobi sweeps after each prolongation (warmstart.smooth_gap)
+SMOOTH_OMEGA = 0.7
+
+
+def _check_warm(warm, fft):
+    st = getattr(warm, "warm_state", None)
+    if st is None:
+        raise ValueError("warm: not a ContactResult of solve_contact (no warm-start state)")
+    if st["N"] != fft.N or st["shape"] != tuple(fft.local_real_shape) or st["row_start"] != fft.row_start:
+        raise ValueError(f"warm: result is for grid N={st['N']} rows {st['row_start']}.. "
+                         f"shape {st['shape']}, this solve has N={fft.N} rows {fft.row_start}.. "
+                         f"shape {fft.local_real_shape}")
+    return st
+
+
+def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, method="snes",
+                  petsc_options=None, warm=None, coarse=True, max_iterations=None,
+                  store=("pressure", "gap", "displacement"), monitor=None):
+    """Steady sliding contact of a viscoelastic half-space on the rigid rough surface ``h``.
+
+    Parameters
+    ----------
+    fft : SlabFFT of the N x N grid; L : period (m); h : local rows of the surface heights (m)
+    modulus : callable E(omega) with attributes nu, E0, Einf; velocity : sliding speed (m/s, >= 0)
+    sigma0 : nominal pressure (Pa, > 0)
+    tolerance : scale-free convergence tolerance (complementarity / sigma0, penetration / h_rms,
+        force balance); see operator.py
+    method : "snes" (PETSc semismooth Newton, any modulus) or "pk" (Polonsky-Keer CG, elastic only:
+        ValueError if Im E(q_x v) != 0 anywhere on the grid)
+    petsc_options : dict or list of "-key value" strings for the SNES/KSP (solver prefix added)
+    warm : previous ContactResult on the same grid (its gap, or for "pk" its pressure, starts the
+        iteration; coarse grids are then skipped)
+    coarse : solve on N/4 and N/2 first (snes only; needs N divisible by 2 with N/2 >= 128)
+    max_iterations : Newton iterations (snes, fine grid; default 100) or CG iterations (pk, default
+        20000)
+    store : which local fields to return ("pressure", "gap", "displacement")
+    monitor : optional callable(level_N, iteration, residual) for progress output
+
+    Returns a ContactResult; never raises for non-convergence (converged=False, residual, reason).
+    """
+    t0 = time.perf_counter()
+    comm = fft.comm
+    if method not in _METHODS:
+        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    store = tuple(store or ())
+    for s in store:
+        if s not in _STORE:
+            raise ValueError(f"store: unknown field {s!r} (allowed {_STORE})")
+    if not (tolerance > 0):
+        raise ValueError("tolerance must be > 0")
+    velocity = float(velocity)
+    if method == "pk" and not is_elastic_on_grid(fft, L, modulus, velocity):
+        raise ValueError("method 'pk' (Polonsky-Keer) needs an elastic operator: Im E(q_x v) != 0 on "
+                         "this grid at this velocity; use method 'snes'")
+    wst = _check_warm(warm, fft) if warm is not None else None
+
+    tr0 = fft.transforms
+    op = ContactOperator(fft, L, modulus, velocity, sigma0, h)
+    levels_info = []
+    by_level = {}
+
+    def count(f, before, n):
+        d = (f.transforms - before) / 2.0
+        by_level[n] = by_level.get(n, 0.0) + d
+
+    if method == "pk":
+        p0 = None
+        if wst is not None and wst.get("pressure") is not None:
+            p0 = wst["pressure"]
+        maxit = 20000 if max_iterations is None else int(max_iterations)
+        mon = None if monitor is None else (lambda it, r: monitor(fft.N, it, r))
+        phat, ghat, info = pk_solve(op, tol=tolerance, max_iter=maxit, p0=p0, monitor=mon)
+        act = phat > 0
+        info["linear_iterations"] = 0
+    else:
+        from vecontact.solver.snes import ncp_solve
+        g0 = None
+        if wst is not None:
+            g0 = wst["gap"] / op.ell
+        elif coarse:
+            lv = coarse_levels(fft.N, comm.size, min_n=COARSE_MIN_N, max_levels=COARSE_LEVELS)
+            prev = None
+            for n in lv:
+                fc = coarse_fft(fft, n)
+                b = fc.transforms
+                bf = fft.transforms
+                Hc = fourier_transfer(fft, op.h_fourier, fc)
+                hc = fc.backward(Hc)
+                opc = ContactOperator(fc, L, modulus, velocity, sigma0, hc, h_fourier=Hc)
+                if prev is None:
+                    gc0 = bearing_guess(opc)
+                else:
+                    gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), SMOOTH_SWEEPS,
+                                     SMOOTH_OMEGA)
+                mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
+                gh, ph, _, inf = ncp_solve(opc, gc0, tol=max(COARSE_TOL, tolerance),
+                                           petsc_options=petsc_options, max_it=COARSE_MAX_IT,
+                                           monitor=mon, lin_rtol=LIN_RTOL)
+                if prev is not None:
+                    # the prolongation's transforms on the previous (coarser) grid were counted there
+                    pass
+                count(fc, b, n)
+                count(fft, bf, fft.N)
+                levels_info.append(dict(N=n, iterations=inf["iterations"],
+                                        linear_iterations=inf["linear_iterations"],
+                                        converged=inf["converged"], residual=inf["residual"],
+                                        reason=inf["reason"]))
+                prev = (opc, gh, ph)
+            if prev is not None:
+                b = prev[0].fft.transforms
+                bf = fft.transforms
+                g0 = prolong_gap(prev[0], prev[1], prev[2], op)
+                count(prev[0].fft, b, prev[0].N)
+                count(fft, bf, fft.N)
+                g0 = smooth_gap(op, g0, SMOOTH_SWEEPS, SMOOTH_OMEGA)
+        if g0 is None:
+            g0 = bearing_guess(op)
+        maxit = 100 if max_iterations is None else int(max_iterations)
+        mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
+        bf = fft.transforms
+        ghat, phat, act, info = ncp_solve(op, g0, tol=tolerance, petsc_options=petsc_options,
+                                          max_it=maxit, monitor=mon, lin_rtol=LIN_RTOL)
+        levels_info.append(dict(N=fft.N, iterations=info["iterations"],
+                                linear_iterations=info["linear_iterations"],
+                                converged=info["converged"], residual=info["residual"],
+                                reason=info["reason"]))
+
+    # returned fields (SI): zero pressure off contact, zero gap in contact
+    p_out = np.where(act, phat * op.sigma0, 0.0)
+    g_out = np.where(act, 0.0, ghat * op.ell)
+    scal, w = postprocess(op, p_out, g_out)
+    # fine-grid transforms not attributed to a coarse level
+    fine_total = (fft.transforms - tr0) / 2.0
+    coarse_on_fine = by_level.get(fft.N, 0.0)
+    by_level[fft.N] = fine_total
+    del coarse_on_fine
+    pairs = sum(v * pair_weight(n, fft.N) for n, v in by_level.items())
+    seconds = comm.bcast(time.perf_counter() - t0, root=0)
+    info_meas = info["measures"]
+    res = ContactResult(
+        area=scal["area"], mu=scal["mu"], mu_geometric=scal["mu_geometric"], mean_gap=scal["mean_gap"],
+        rigid_position=scal["rigid_position"], converged=bool(info["converged"]),
+        iterations=int(info["iterations"]), linear_iterations=int(info.get("linear_iterations", 0)),
+        fft_pairs=float(pairs), residual=float(info["residual"]), seconds=float(seconds),
+        reason=str(info["reason"]), method=method,
+        pressure=p_out if "pressure" in store else None,
+        gap=g_out if "gap" in store else None,
+        displacement=w if "displacement" in store else None,
+        fft_pairs_by_level={int(k): float(v) for k, v in sorted(by_level.items())},
+        measures=dict(complementarity=info_meas[0], penetration=info_meas[1], force=info_meas[2]),
+        sigma0=float(sigma0), velocity=velocity, N=fft.N, L=float(L),
+        diagnostics=dict(levels=levels_info, ell=op.ell, hrms=op.hrms, k=op.k, kappa=op.kappa,
+                         history=[(int(a), float(b)) for a, b, *_ in info.get("history", [])],
+                         active_set_changes=info.get("nchg", []),
+                         linear_history=info.get("lin_history", [])),
+        warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
+                        gap=g_out, pressure=p_out, sigma0=float(sigma0), velocity=velocity),
+    )
+    return res

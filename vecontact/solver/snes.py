@@ -1,0 +1,455 @@
+"""Matrix-free PETSc SNES solve of the contact NCP in the gap formulation.
+
+Unknown: the nondimensional gap g^ >= 0 (units h_rms), pressure p^(g^) = 1 + m (g^ + h^) (units sigma0).
+m has no q = 0 mode, so mean(p^) = 1 for every iterate: load control for free, no extra unknown.
+NCP:  g^ >= 0,  p^ >= 0,  g^ p^ = 0.
+
+Default method: semismooth Newton (= primal-dual active set) on the min-residual
+    F(g^) = min(g^, p^(g^) / kappa)           (kappa = k ell / sigma0, see operator.py)
+with SNES newtonls + basic (full-step) line search.  Active (contact) set C = {p^ >= kappa g^} of the
+current iterate, free set F its complement.  Generalised Jacobian (Python Mat, one FFT pair)
+    J x = P_C x + P_F m x / kappa
+and preconditioner (Python PC, one FFT pair): identity on C, the Fourier-diagonal compliance
+c = 1/m on F plus a rigid shift (so that the correction does not move the contact set on average):
+    B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C)
+KSP: FGMRES (right preconditioning: the residual norm is the true one; no extra PC application to
+form the solution).  Linear tolerance: loose (``lin_rtol``, default 0.1) while the active set changes
+between Newton steps, tight once it stops changing (the step is then exact, PDAS converges in one
+more step); absolute tolerance derived from the convergence tolerance.  ``-snes_ksp_ew`` switches to
+Eisenstat-Walker forcing instead.
+
+Alternatives selectable with ``petsc_options``: ``-snes_type vinewtonssls`` / ``vinewtonrsls``
+(PETSc's VI solvers on the NCP written with bounds g^ >= 0 and residual p^(g^); the Jacobian is then m
+itself and the PC the compliance, see ``vi_mode``).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+__all__ = ["ncp_solve", "petsc"]
+
+_PETSC = None
+
+
+def petsc():
+    """Import petsc4py lazily (after mpi4py), initialising PETSc once."""
+    global _PETSC
+    if _PETSC is None:
+        from petsc4py import PETSc
+        _PETSC = PETSc
+    return _PETSC
+
+
+def _reason_name(PETSc, cls, value):
+    for k in dir(cls):
+        if not k.startswith("_") and getattr(cls, k) == value:
+            return k
+    return str(value)
+
+
+class _State:
+    """Residual, Jacobian and preconditioner of the semismooth formulation (all ranks)."""
+
+    def __init__(self, op, tol, lin_rtol, vi=False):
+        self.op = op
+        fft = op.fft
+        self.fft = fft
+        self.shape = fft.local_real_shape
+        self.kappa = op.kappa
+        self.tol = tol
+        self.lin_rtol = lin_rtol
+        self.vi = vi
+        self.g = fft.real_array()      # iterate of the cached pressure
+        self.p = fft.real_array()      # p^(g) of the last residual evaluation
+        self.valid = False
+        self.tmp = fft.real_array()
+        self.tmp2 = fft.real_array()
+        self.act = np.zeros(self.shape, dtype=bool)
+        self._free = np.ones(self.shape, dtype=bool)
+        self.freef = fft.real_array()
+        self.nact = 0
+        self.m_k = op.m / op.kappa          # Jacobian multiplier on the free rows
+        self.c_k = op.c * op.kappa          # preconditioner multiplier on the free rows
+        self.act_prev = None
+        self.nchg_history = []
+        self.lin_history = []
+        self.history = []
+        self.n2 = float(op.N) ** 2
+        self.ksp = None
+
+    # ------------------------------------------------------------------ helpers
+    def _view(self, vec, readonly=True):
+        return vec.getArray(readonly=readonly).reshape(self.shape)
+
+    def ensure(self, g):
+        """Make sure (self.g, self.p) is the iterate g (recompute p if not)."""
+        if self.valid and np.array_equal(g, self.g):
+            return
+        np.copyto(self.g, g)
+        self.op.pressure(self.g, self.p)
+        self.valid = True
+
+    def active_set(self):
+        act = self.p >= self.kappa * self.g
+        comm = self.fft.comm
+        nact = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+        if nact == 0:  # a contact set is needed (mean p = 1 > 0); take the most compressed point
+            val = self.p - self.kappa * self.g
+            loc = float(val.max()) if val.size else -np.inf
+            best = comm.allreduce((loc, comm.rank), op=MPI.MAXLOC)
+            if comm.rank == best[1] and val.size:
+                act.flat[int(np.argmax(val))] = True
+        return act
+
+    # ------------------------------------------------------------------ SNES callbacks
+    def residual(self, snes, X, F):
+        g = self._view(X)
+        self.ensure(g)
+        f = self._view(F, readonly=False)
+        if self.vi:
+            np.copyto(f, self.p)
+        else:
+            np.minimum(self.g, self.p / self.kappa, out=f)
+
+    def jacobian(self, snes, X, J, P):
+        g = self._view(X)
+        self.ensure(g)
+        if self.vi:
+            self.jac_ctx.Db = None
+            self.jac_ctx.Da = None
+            return
+        act = self.active_set()
+        comm = self.fft.comm
+        if self.act_prev is None:
+            nchg = -1
+        else:
+            nchg = comm.allreduce(int(np.count_nonzero(act != self.act_prev)), op=MPI.SUM)
+        self.nchg_history.append(nchg)
+        self.lin_history.append(snes.getLinearSolveIterations())
+        self.act_prev = act
+        self.act = act
+        np.logical_not(act, out=self._free)
+        np.copyto(self.freef, self._free)
+        self.nact = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+        if self.ksp is not None and self.lin_rtol is not None:
+            if nchg == 0 and len(self.nchg_history) >= 2 and self.nchg_history[-2] == 0:
+                # the previous step was already solved "exactly" on this active set and did not
+                # converge: the 2-norm tolerance was too loose for the max-norm measure
+                self.atol *= 0.03
+            atol = self.atol
+            rtol = 1e-14 if nchg == 0 else self.lin_rtol
+            self.ksp.setTolerances(rtol=rtol, atol=atol)
+
+    def converged(self, snes, it, norms):
+        PETSc = petsc()
+        X = snes.getSolution()
+        g = self._view(X)
+        self.ensure(g)
+        act = self.p >= self.kappa * self.g
+        meas = self.op.measures(self.g, self.p, act)
+        res = max(meas)
+        self.last_measures = meas
+        self.history.append((it, res, self.fft.transforms))
+        if self.monitor is not None:
+            self.monitor(it, res, meas)
+        if res <= self.tol:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
+        if not np.isfinite(res):
+            return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
+        if it >= snes.getTolerances()[3]:
+            return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
+        return PETSc.SNES.ConvergedReason.ITERATING
+
+
+class _JacobianMat:
+    """J x = P_C x + P_F m x / kappa (semismooth) or J x = Db (m x) + Da x (VI mode; Db, Da are the
+    row scaling and diagonal shift vinewtonssls applies to the Jacobian, none for vinewtonrsls)."""
+
+    def __init__(self, st):
+        self.st = st
+        self.Db = None
+        self.Da = None
+
+    def mult(self, mat, x, y):
+        st = self.st
+        xa = st._view(x)
+        ya = st._view(y, readonly=False)
+        if st.vi:
+            st.fft.apply(xa, st.op.m, ya)
+            if self.Db is not None:
+                ya *= self.Db
+            if self.Da is not None:
+                ya += self.Da * xa
+            return
+        st.fft.apply(xa, st.m_k, ya)       # m x / kappa on every point
+        np.copyto(ya, xa, where=st.act)    # identity rows on the contact set
+
+    def multTranspose(self, mat, x, y):
+        """VI mode only: J^T x = m^T (Db x) + Da x; the transpose of a real Fourier multiplier
+        operator has the multiplier conj(m)."""
+        st = self.st
+        xa = st._view(x)
+        ya = st._view(y, readonly=False)
+        src = xa if self.Db is None else xa * self.Db
+        if not hasattr(st, "m_conj"):
+            st.m_conj = np.conj(st.op.m)
+        st.fft.apply(np.ascontiguousarray(src), st.m_conj, ya)
+        if self.Da is not None:
+            ya += self.Da * xa
+
+    def diagonalScale(self, mat, L=None, R=None):
+        if R is not None and bool(R):
+            raise NotImplementedError("right diagonal scaling")
+        if L is not None and bool(L):
+            d = L.getArray(readonly=True).reshape(self.st.shape).copy()
+            self.Db = d if self.Db is None else self.Db * d
+            if self.Da is not None:
+                self.Da = self.Da * d
+
+    def setDiagonal(self, mat, D, addv=None):
+        d = D.getArray(readonly=True).reshape(self.st.shape).copy()
+        self.Da = d if self.Da is None else self.Da + d
+
+    def createSubMatrix(self, mat, isrow, iscol=None, cll=None, submat=None):
+        """Square submatrix J_II on the index set I (for vinewtonrsls): scatter, J, gather."""
+        idx = isrow.getIndices() - self.st.fft.row_start * self.st.fft.N
+        n = idx.size
+        ntot = self.st.fft.comm.allreduce(n, op=MPI.SUM)
+        ctx = _SubMat(self, idx)
+        if submat is not None and submat.getSize()[0] == ntot:
+            submat.getPythonContext().__init__(self, idx)
+            return submat
+        sub = self.st._PETSc.Mat().createPython(((n, ntot), (n, ntot)), context=ctx, comm=self.st.fft.comm)
+        sub.setUp()
+        return sub
+
+
+class _SubMat:
+    def __init__(self, parent, idx):
+        self.parent = parent
+        self.idx = idx
+
+    def mult(self, mat, x, y):
+        st = self.parent.st
+        full = st.tmp2
+        full[...] = 0.0
+        full.flat[self.idx] = x.getArray(readonly=True)
+        st.fft.apply(full, st.op.m, st.tmp)
+        out = st.tmp.flat[self.idx]
+        if self.parent.Db is not None:
+            out = out * self.parent.Db.flat[self.idx]
+        if self.parent.Da is not None:
+            out = out + self.parent.Da.flat[self.idx] * x.getArray(readonly=True)
+        y.getArray()[:] = out
+
+
+class _Precond:
+    """B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C)   (VI mode: B r = c r)."""
+
+    def __init__(self, st):
+        self.st = st
+
+    def setUp(self, pc):
+        pass
+
+    def apply(self, pc, x, y):
+        st = self.st
+        if st.vi:
+            A, _ = pc.getOperators()
+            ctx = A.getPythonContext() if A.getType() == "python" else None
+            if isinstance(ctx, _SubMat):   # reduced space: compliance on I with the rigid shift
+                idx = ctx.idx
+                full = st.tmp2
+                full[...] = 0.0
+                full.flat[idx] = x.getArray(readonly=True)
+                st.fft.apply(full, st.op.c, st.tmp)
+                mask = np.ones(st.shape, dtype=bool)
+                mask.flat[idx] = False
+                buf = np.array([np.sum(st.tmp, where=mask), np.count_nonzero(mask)], dtype=float)
+                st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+                if buf[1] > 0:
+                    st.tmp -= buf[0] / buf[1]
+                y.getArray()[:] = st.tmp.flat[idx]
+                return
+            st.fft.apply(st._view(x), st.op.c, st._view(y, readonly=False))
+            return
+        ra = st._view(x)
+        ya = st._view(y, readonly=False)
+        act = st.act
+        np.multiply(ra, st.freef, out=st.tmp2)           # P_F r
+        st.fft.apply(st.tmp2, st.c_k, ya)                # kappa c P_F r
+        if st.nact > 0:
+            buf = np.array([np.sum(ya, where=act)])
+            if st.fft.size > 1:
+                st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+            ya -= buf[0] / st.nact                       # rigid shift: <.>_C = 0
+        np.copyto(ya, ra, where=act)                     # identity on the contact set
+
+
+def _apply_options(PETSc, prefix, defaults, user):
+    """Put defaults (unless given by the user) and the user options into the options database."""
+    opts = PETSc.Options()
+    keys = []
+    user_items = _parse_options(user)
+    user_keys = {k for k, _ in user_items}
+    for k, v in defaults.items():
+        if k not in user_keys:
+            opts[prefix + k] = v
+            keys.append(prefix + k)
+    for k, v in user_items:
+        opts[prefix + k] = v
+        keys.append(prefix + k)
+    return keys
+
+
+def _parse_options(user):
+    """dict {'snes_type': 'x'} / {'-snes_type': 'x'} or list of '-key value' strings -> [(key, value)]."""
+    items = []
+    if user is None:
+        return items
+    if isinstance(user, dict):
+        for k, v in user.items():
+            k = str(k).lstrip("-")
+            if v is None or v is True:
+                v = ""
+            elif v is False:
+                v = "false"
+            items.append((k, str(v)))
+        return items
+    if isinstance(user, str):
+        user = [user]
+    toks = []
+    for s in user:
+        toks.extend(str(s).split())
+    i = 0
+    while i < len(toks):
+        k = toks[i]
+        if not k.startswith("-"):
+            raise ValueError(f"petsc_options: expected '-key [value]', got {k!r}")
+        v = ""
+        if i + 1 < len(toks) and not (toks[i + 1].startswith("-") and not _is_number(toks[i + 1])):
+            v = toks[i + 1]
+            i += 1
+        items.append((k.lstrip("-"), v))
+        i += 1
+    return items
+
+
+def _is_number(s):
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+_COUNTER = [0]
+ATOL_FACTOR = 1.0
+
+
+def default_restart(nloc, budget=None):
+    """FGMRES restart length: 60, capped so that its 2 (restart + 1) vectors fit in RESTART_MEMORY
+    bytes per rank (4096^2 on 2 ranks: 37)."""
+    budget = RESTART_MEMORY if budget is None else budget
+    return int(max(10, min(60, budget // (16 * max(nloc, 1)) - 1)))
+
+
+RESTART_MEMORY = 5e9
+
+
+def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, restart=None,
+              monitor=None, ksp_max_it=400):
+    """Solve the NCP of ``op`` (ContactOperator) from the nondimensional gap ``g0``.
+
+    Returns (ghat, phat, active, info); info has iterations, linear_iterations, converged, reason,
+    residual, measures, history.
+    """
+    PETSc = petsc()
+    fft = op.fft
+    comm = fft.comm
+    nloc = int(np.prod(fft.local_real_shape))
+    ntot = fft.N * fft.N
+    if restart is None:
+        restart = fft.comm.allreduce(default_restart(nloc), op=MPI.MIN)
+    _COUNTER[0] += 1
+    prefix = f"vecontact{_COUNTER[0]}_"
+    user_items = dict(_parse_options(petsc_options))
+    snes_type = user_items.get("snes_type", "newtonls")
+    vi = snes_type.startswith("vi")
+    st = _State(op, tol, lin_rtol if "snes_ksp_ew" not in user_items else None, vi=vi)
+    st.monitor = monitor
+    st.atol = ATOL_FACTOR * tol / op.kappa  # 2-norm >= max-norm: the exact step meets the measure
+    defaults = {
+        "snes_type": "newtonls",
+        "snes_linesearch_type": "basic",
+        "ksp_type": "fgmres",
+        "ksp_gmres_restart": str(restart),
+        "snes_max_linear_solve_fail": "1000",
+        "ksp_max_it": str(ksp_max_it),
+    }
+    if vi:
+        defaults.update({"snes_vi_zero_tolerance": "1e-12", "ksp_rtol": "1e-3",
+                         "snes_linesearch_type": "bt" if snes_type == "vinewtonssls" else "basic"})
+        st.atol = 0.0
+    keys = _apply_options(PETSc, prefix, defaults, petsc_options)
+    snes = None
+    try:
+        X = PETSc.Vec().createMPI((nloc, ntot), comm=comm)
+        X.getArray()[:] = np.asarray(g0, dtype=float).ravel()
+        Fv = X.duplicate()
+        st._PETSc = PETSc
+        st.jac_ctx = _JacobianMat(st)
+        J = PETSc.Mat().createPython(((nloc, ntot), (nloc, ntot)), context=st.jac_ctx, comm=comm)
+        J.setUp()
+        snes = PETSc.SNES().create(comm=comm)
+        snes.setOptionsPrefix(prefix)
+        snes.setFunction(st.residual, Fv)
+        snes.setJacobian(st.jacobian, J, J)
+        ksp = snes.getKSP()
+        pc = ksp.getPC()
+        pc.setType("python")
+        pc.setPythonContext(_Precond(st))
+        snes.setTolerances(max_it=int(max_it))
+        snes.setConvergenceTest(st.converged)
+        if vi:
+            lo = X.duplicate()
+            lo.set(0.0)
+            hi = X.duplicate()
+            hi.set(PETSc.INFINITY)
+            snes.setVariableBounds(lo, hi)
+        snes.setFromOptions()
+        st.ksp = ksp
+        t0 = time.perf_counter()
+        snes.solve(None, X)
+        reason_code = snes.getConvergedReason()
+        reason = _reason_name(PETSc, PETSc.SNES.ConvergedReason, reason_code)
+        its = snes.getIterationNumber()
+        lits = snes.getLinearSolveIterations()
+        g = X.getArray(readonly=True).reshape(fft.local_real_shape)
+        st.ensure(g)
+        act = st.p >= st.kappa * st.g
+        meas = op.measures(st.g, st.p, act)
+        res = max(meas)
+        converged = bool(res <= tol)
+        ghat = st.g.copy()
+        phat = st.p.copy()
+        info = dict(iterations=int(its), linear_iterations=int(lits), converged=converged,
+                    reason="converged" if converged else reason.lower(), residual=float(res),
+                    measures=meas, history=st.history, nchg=st.nchg_history,
+                    lin_history=st.lin_history + [int(lits)],
+                    seconds=time.perf_counter() - t0, snes_type=snes.getType(), ksp_type=ksp.getType())
+        for obj in (X, Fv, J):
+            obj.destroy()
+        return ghat, phat, act, info
+    finally:
+        if snes is not None:
+            snes.destroy()
+        opts = PETSc.Options()
+        for k in keys:
+            try:
+                opts.delValue(k)
+            except Exception:
+                pass
