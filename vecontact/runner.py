@@ -8,7 +8,7 @@ import sys
 from mpi4py import MPI
 
 from vecontact import cases as sweep
-from vecontact.errors import InputError
+from vecontact.errors import InputError, ResultsFileError
 from vecontact.io.results import ResultsFile
 from vecontact.job import physics_hash, to_yaml
 from vecontact.physics.spectrum import Tabulated
@@ -41,9 +41,12 @@ def open_results(job, comm):
             writer = ResultsFile.open(job["output"], to_yaml(job), physics_hash(job), comm.size)
         except InputError as exc:
             err = exc
-    err = comm.bcast(err, root=0)
-    if err is not None:
-        raise err
+    # the exception object itself does not survive pickling (InputError takes two arguments)
+    info = comm.bcast(None if err is None else (isinstance(err, ResultsFileError), err.key, err.problem), root=0)
+    if info is not None:
+        if err is not None:
+            raise err
+        raise (ResultsFileError if info[0] else InputError)(info[1], info[2])
     return writer
 
 

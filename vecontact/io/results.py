@@ -112,6 +112,25 @@ def atomic_h5(path, fill):
             os.remove(tmp)
 
 
+def write_fields_file(path, case_name, arrays, attrs):
+    """Write one case's fields next to the results file ``path``, atomically, from any rank.
+
+    The file is ``<path>.fields/<case_name>.h5``; returns its path relative to the folder of
+    ``path`` (what :meth:`ResultsFile.link_fields` stores as the external link).
+    """
+    fields_dir = path + ".fields"
+    os.makedirs(fields_dir, exist_ok=True)
+    fname = os.path.join(fields_dir, f"{case_name}.h5")
+
+    def fill(f):
+        for k, v in arrays.items():
+            f.create_dataset(k, data=v, compression="gzip", compression_opts=1, shuffle=True)
+        for k, v in attrs.items():
+            f.attrs[k] = v
+    atomic_h5(fname, fill)
+    return os.path.join(os.path.basename(fields_dir), f"{case_name}.h5")
+
+
 class ResultsFile:
     """Rank-0 writer of a job's results; holds the finished rows in memory.
 
@@ -137,6 +156,12 @@ class ResultsFile:
         self = cls(path, job_yaml, physics_hash, nranks)
         if os.path.exists(path):
             self._load_existing()
+        else:
+            folder = os.path.dirname(os.path.abspath(path))
+            try:
+                os.makedirs(folder, exist_ok=True)
+            except OSError as exc:
+                raise ResultsFileError("output", f"cannot create the folder {folder} ({exc.strerror})") from None
         return self
 
     def _load_existing(self):
@@ -183,16 +208,11 @@ class ResultsFile:
 
     def add_fields(self, case_name, arrays, attrs):
         """Write one case's fields to their own file (atomically); link it at next commit."""
-        os.makedirs(self.fields_dir(), exist_ok=True)
-        fname = os.path.join(self.fields_dir(), f"{case_name}.h5")
+        self.link_fields(case_name, write_fields_file(self.path, case_name, arrays, attrs))
 
-        def fill(f):
-            for k, v in arrays.items():
-                f.create_dataset(k, data=v, compression="gzip", compression_opts=1, shuffle=True)
-            for k, v in attrs.items():
-                f.attrs[k] = v
-        atomic_h5(fname, fill)
-        self.field_links[case_name] = os.path.join(os.path.basename(self.fields_dir()), f"{case_name}.h5")
+    def link_fields(self, case_name, rel):
+        """Link a fields file already written by :func:`write_fields_file` (any rank) at next commit."""
+        self.field_links[case_name] = rel
 
     def table(self):
         keys = sorted(self.rows)

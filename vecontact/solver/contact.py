@@ -10,7 +10,7 @@ from vecontact.solver.operator import ContactOperator, is_elastic_on_grid
 from vecontact.solver.pk import pk_solve
 from vecontact.solver.result import ContactResult, pair_weight, postprocess
 from vecontact.solver.warmstart import (bearing_guess, coarse_fft, coarse_levels, fourier_transfer,
-                                        prolong_gap, smooth_gap)
+                                        prolong_gap, smooth_gap, transfer_real)
 
 __all__ = ["solve_contact"]
 
@@ -84,9 +84,10 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     levels_info = []
     by_level = {}
 
-    def count(f, before, n):
-        d = (f.transforms - before) / 2.0
-        by_level[n] = by_level.get(n, 0.0) + d
+    coarse_start = {}   # coarse SlabFFT -> its transform counter when first used in this call
+
+    def touch(f):
+        coarse_start.setdefault(f.N, (f, f.transforms))
 
     if method == "pk":
         p0 = None
@@ -100,19 +101,22 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     else:
         from vecontact.solver.snes import ncp_solve
         g0 = None
-        if wst is not None:
+        lv = coarse_levels(fft.N, comm.size, min_n=COARSE_MIN_N, max_levels=COARSE_LEVELS) if coarse else []
+        if wst is not None and not lv:
             g0 = wst["gap"] / op.ell
-        elif coarse:
-            lv = coarse_levels(fft.N, comm.size, min_n=COARSE_MIN_N, max_levels=COARSE_LEVELS)
+        elif lv:
             prev = None
             for n in lv:
                 fc = coarse_fft(fft, n)
-                b = fc.transforms
-                bf = fft.transforms
+                touch(fc)
                 Hc = fourier_transfer(fft, op.h_fourier, fc)
                 hc = fc.backward(Hc)
                 opc = ContactOperator(fc, L, modulus, velocity, sigma0, hc, h_fourier=Hc)
-                if prev is None:
+                if prev is None and wst is not None:
+                    # previous solution of the sweep, restricted to the coarsest grid
+                    gw = transfer_real(fft, wst["gap"], fc)
+                    gc0 = smooth_gap(opc, np.maximum(gw / opc.ell, 0.0), SMOOTH_SWEEPS, SMOOTH_OMEGA)
+                elif prev is None:
                     gc0 = bearing_guess(opc)
                 else:
                     gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), SMOOTH_SWEEPS,
@@ -121,22 +125,13 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 gh, ph, _, inf = ncp_solve(opc, gc0, tol=max(COARSE_TOL, tolerance),
                                            petsc_options=petsc_options, max_it=COARSE_MAX_IT,
                                            monitor=mon, lin_rtol=LIN_RTOL)
-                if prev is not None:
-                    # the prolongation's transforms on the previous (coarser) grid were counted there
-                    pass
-                count(fc, b, n)
-                count(fft, bf, fft.N)
                 levels_info.append(dict(N=n, iterations=inf["iterations"],
                                         linear_iterations=inf["linear_iterations"],
                                         converged=inf["converged"], residual=inf["residual"],
                                         reason=inf["reason"]))
                 prev = (opc, gh, ph)
             if prev is not None:
-                b = prev[0].fft.transforms
-                bf = fft.transforms
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
-                count(prev[0].fft, b, prev[0].N)
-                count(fft, bf, fft.N)
                 g0 = smooth_gap(op, g0, SMOOTH_SWEEPS, SMOOTH_OMEGA)
         if g0 is None:
             g0 = bearing_guess(op)
@@ -155,10 +150,9 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     g_out = np.where(act, 0.0, ghat * op.ell)
     scal, w = postprocess(op, p_out, g_out)
     # fine-grid transforms not attributed to a coarse level
-    fine_total = (fft.transforms - tr0) / 2.0
-    coarse_on_fine = by_level.get(fft.N, 0.0)
-    by_level[fft.N] = fine_total
-    del coarse_on_fine
+    for n, (f, t0c) in coarse_start.items():
+        by_level[n] = (f.transforms - t0c) / 2.0
+    by_level[fft.N] = (fft.transforms - tr0) / 2.0
     pairs = sum(v * pair_weight(n, fft.N) for n, v in by_level.items())
     seconds = comm.bcast(time.perf_counter() - t0, root=0)
     info_meas = info["measures"]
@@ -178,7 +172,10 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          history=[(int(a), float(b)) for a, b, *_ in info.get("history", [])],
                          active_set_changes=info.get("nchg", []),
                          linear_history=info.get("lin_history", [])),
+        # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
+        # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
-                        gap=g_out, pressure=p_out, sigma0=float(sigma0), velocity=velocity),
+                        gap=g_out, pressure=p_out if (method == "pk" or "pressure" in store) else None,
+                        sigma0=float(sigma0), velocity=velocity),
     )
     return res

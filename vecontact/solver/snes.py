@@ -18,9 +18,13 @@ between Newton steps, tight once it stops changing (the step is then exact, PDAS
 more step); absolute tolerance derived from the convergence tolerance.  ``-snes_ksp_ew`` switches to
 Eisenstat-Walker forcing instead.
 
-Alternatives selectable with ``petsc_options``: ``-snes_type vinewtonssls`` / ``vinewtonrsls``
-(PETSc's VI solvers on the NCP written with bounds g^ >= 0 and residual p^(g^); the Jacobian is then m
-itself and the PC the compliance, see ``vi_mode``).
+Alternatives selectable with ``petsc_options`` (measured, see /tmp/notes_solver.md):
+``-snes_type vinewtonrsls`` (PETSc reduced-space VI on the NCP written as bounds g^ >= 0 with residual
+p^(g^); Jacobian m, createSubMatrix gives the free-set block, the PC is the compliance on the free set
+with the rigid shift): converges, ~1.3x the FFT pairs of the default from a cold start.
+``-snes_type vinewtonssls`` (semismooth Fischer-Burmeister; Jacobian Db m + Da, transpose via conj(m)):
+runs, but the compliance PC does not fit the scaled Jacobian; did not converge in 30 Newton steps at
+256^2.  ``-ksp_type gmres/bcgs/...`` work as well (bcgs: ~1.5x the pairs, fewer vector operations).
 """
 from __future__ import annotations
 
@@ -58,7 +62,7 @@ class _State:
         fft = op.fft
         self.fft = fft
         self.shape = fft.local_real_shape
-        self.kappa = op.kappa
+        self.kappa = op.kappa * AS_FACTOR   # PDAS parameter c (active set p >= c g)
         self.tol = tol
         self.lin_rtol = lin_rtol
         self.vi = vi
@@ -71,8 +75,8 @@ class _State:
         self._free = np.ones(self.shape, dtype=bool)
         self.freef = fft.real_array()
         self.nact = 0
-        self.m_k = op.m / op.kappa          # Jacobian multiplier on the free rows
-        self.c_k = op.c * op.kappa          # preconditioner multiplier on the free rows
+        self.m_k = op.m / self.kappa        # Jacobian multiplier on the free rows
+        self.c_k = op.c * self.kappa        # preconditioner multiplier on the free rows
         self.act_prev = None
         self.nchg_history = []
         self.lin_history = []
@@ -141,14 +145,15 @@ class _State:
                 self.atol *= 0.03
             atol = self.atol
             rtol = 1e-14 if nchg == 0 else self.lin_rtol
-            self.ksp.setTolerances(rtol=rtol, atol=atol)
+            maxit = self.ksp_max_it if nchg == 0 else min(self.ksp_max_it, LIN_MAXIT_CHANGING)
+            self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=maxit)
 
     def converged(self, snes, it, norms):
         PETSc = petsc()
         X = snes.getSolution()
         g = self._view(X)
         self.ensure(g)
-        act = self.p >= self.kappa * self.g
+        act = self.p >= self.op.kappa * self.g
         meas = self.op.measures(self.g, self.p, act)
         res = max(meas)
         self.last_measures = meas
@@ -348,6 +353,8 @@ def _is_number(s):
 
 _COUNTER = [0]
 ATOL_FACTOR = 1.0
+AS_FACTOR = 1.0   # PDAS c = AS_FACTOR x kappa
+LIN_MAXIT_CHANGING = 20  # cap of the KSP iterations of Newton steps whose active set changed
 
 
 def default_restart(nloc, budget=None):
@@ -379,9 +386,11 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
     user_items = dict(_parse_options(petsc_options))
     snes_type = user_items.get("snes_type", "newtonls")
     vi = snes_type.startswith("vi")
-    st = _State(op, tol, lin_rtol if "snes_ksp_ew" not in user_items else None, vi=vi)
+    own_lin = not any(k in user_items for k in ("snes_ksp_ew", "ksp_rtol", "ksp_atol"))
+    st = _State(op, tol, lin_rtol if own_lin else None, vi=vi)
     st.monitor = monitor
-    st.atol = ATOL_FACTOR * tol / op.kappa  # 2-norm >= max-norm: the exact step meets the measure
+    st.ksp_max_it = int(ksp_max_it)
+    st.atol = ATOL_FACTOR * tol / st.kappa  # 2-norm >= max-norm: the exact step meets the measure
     defaults = {
         "snes_type": "newtonls",
         "snes_linesearch_type": "basic",
@@ -422,6 +431,7 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
             snes.setVariableBounds(lo, hi)
         snes.setFromOptions()
         st.ksp = ksp
+        st.ksp_max_it = ksp.getTolerances()[3]
         t0 = time.perf_counter()
         snes.solve(None, X)
         reason_code = snes.getConvergedReason()
@@ -430,7 +440,7 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
         lits = snes.getLinearSolveIterations()
         g = X.getArray(readonly=True).reshape(fft.local_real_shape)
         st.ensure(g)
-        act = st.p >= st.kappa * st.g
+        act = st.p >= op.kappa * st.g
         meas = op.measures(st.g, st.p, act)
         res = max(meas)
         converged = bool(res <= tol)

@@ -1,0 +1,371 @@
+"""The MPI task farm (vecontact.farm): scheduling rules, and whole jobs run as subprocesses on
+1 and 2 ranks: equivalence, kill -9 and resume, refusals, a fault on one rank, fields.
+
+The jobs are small (N = 64 and 128). When the real solver / surface generator are not importable
+the subprocesses use the stand-in of tests/scripts/farm_standin.py (test-only).
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from mpi_util import ROOT, mpiexec
+
+SCRIPTS = os.path.join(ROOT, "tests", "scripts")
+sys.path.insert(0, SCRIPTS)
+import farm_standin  # noqa: E402
+
+from vecontact import farm  # noqa: E402
+from vecontact.cases import Case  # noqa: E402
+from vecontact.io.results import CASE_DTYPE, empty_row  # noqa: E402
+
+MAIN = os.path.join(SCRIPTS, "farm_main.py")
+REAL = farm_standin.real_available()
+
+
+# ------------------------------------------------------------------------------------------------
+# helpers
+def write_job(path, output="out.h5", q1=(2.0e6, 4.0e6), velocity=(0.01, 1.0), seeds=(1,),
+              pressure=None, **numerics):
+    job = {
+        "output": output,
+        "surface": {"spectrum": "self-affine", "q0": 2.5e5, "qr": 1.0e6, "q1": list(q1), "hurst": 0.8,
+                    "C0": 1.0616e-28, "null_band": 4, "seeds": list(seeds)},
+        "material": {"model": "havriliak-negami", "E0": 3.0e6, "Einf": 3.0e9, "alpha": 0.5, "beta": 0.5,
+                     "tau": 1.0e-10, "nu": 0.5},
+        "sweep": {"velocity": list(velocity),
+                  "pressure": pressure or {"area_min": 0.03, "area_max": 0.3, "num": 3}},
+        "numerics": dict({"enabled": True, "tolerance": 1e-8}, **numerics),
+    }
+    with open(path, "w") as f:
+        yaml.safe_dump(job, f)
+    return str(path)
+
+
+def env_for(extra=None):
+    env = dict(os.environ)
+    for k in ("PMI_RANK", "PMI_SIZE", farm.FAULT_ENV, "VECONTACT_FARM_STANDIN"):
+        env.pop(k, None)
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    env.setdefault("OMP_NUM_THREADS", "1")
+    env.update(extra or {})
+    return env
+
+
+def command(nranks, args, wrapper=False):
+    """`python -m vecontact ARGS`, or tests/scripts/farm_main.py (stand-in solver when the real one is
+    missing; test-only MPI thread level) when the real solver is missing or ``wrapper``."""
+    base = [sys.executable] + ([MAIN] if wrapper or not REAL else ["-m", "vecontact"]) + list(args)
+    return base if nranks == 0 else [mpiexec(), "-n", str(nranks)] + base
+
+
+def vecontact(nranks, args, cwd, timeout=120, env=None, wrapper=False):
+    """Run the CLI (nranks = 0: plain python, no mpiexec); returns the CompletedProcess.
+
+    The run gets its own process group, killed whole on time-out (no orphaned ranks)."""
+    cmd = command(nranks, args, wrapper)
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env_for(env), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def cases_of(path):
+    with h5py.File(path, "r") as f:
+        return f["cases"][()]
+
+
+def assert_same_results(a, b, N_min=64):
+    """Same cases (keys, order) and the same numbers to solver tolerance."""
+    assert len(a) == len(b)
+    for k in ("q1", "seed", "velocity", "pressure", "theory_area", "theory_mu", "N"):
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    np.testing.assert_array_equal(a["status"], b["status"])
+    # area: a count of grid points -- equal, or within a couple of points
+    np.testing.assert_allclose(a["area"], b["area"], rtol=0, atol=2.5 / N_min ** 2)
+    np.testing.assert_allclose(a["mu"], b["mu"], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(a["mu_geometric"], b["mu_geometric"], rtol=1e-4, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------
+# scheduling rules
+def test_ranks_per_case_rule():
+    auto = farm.ranks_for_grid
+    assert [auto(N, 4096) for N in (64, 512, 1024, 2048, 4096, 8192)] == [1, 1, 1, 4, 16, 64]
+    assert auto(4096, 8) == 8            # never more than the ranks available
+    assert auto(8, 100, 16) == 4         # never more than N / 2
+    assert auto(512, 100, 3) == 3
+    assert farm.split_factor(16, 4, 2048) == 4
+    assert farm.split_factor(3, 2, 4) == 2   # 3 ranks > N/2: split even though 3 // 2 == 1
+    assert farm.split_factor(5, 16, 4096) == 1
+
+
+def _cases(q1s=(1e6, 2e6), seeds=(1,), vs=(0.1, 1.0), ps=(1.0, 2.0, 3.0, 4.0)):
+    return sorted(Case(q, s, v, p) for q in q1s for s in seeds for v in vs for p in ps)
+
+
+def test_chains_largest_first_and_rising_pressure():
+    cases = _cases()
+    N = {1e6: 64, 2e6: 2048}
+    todo = np.ones(len(cases), bool)
+    todo[[0, 5]] = False
+    chains = farm.build_chains(cases, todo, N.get, 64)
+    assert [ch.N for ch in chains] == [2048, 2048, 64, 64]
+    assert chains[0].g == 4 and chains[-1].g == 1
+    for ch in chains:
+        ps = [cases[i].pressure for i in ch.cases]
+        assert ps == sorted(ps)
+        assert all(todo[i] for i in ch.cases)
+    assert sum(len(ch.cases) for ch in chains) == len(cases) - 2
+
+
+def _simulate(nranks, cases, N, rpc="auto", durations=None, seed=0):
+    """Discrete-event run of the Coordinator with groups that split like the real farm."""
+    rng = np.random.default_rng(seed)
+    chains = farm.build_chains(cases, np.ones(len(cases), bool), N.get, nranks, rpc)
+    coord = farm.Coordinator(chains, cases, writer=None, nranks=nranks)
+    solved, order = [], []
+    # event queue: (time, leader, group size, finished)
+    events = [(0.0, 0, nranks, None)]
+    while events:
+        events.sort(key=lambda e: e[0])
+        t, leader, gsize, fin = events.pop(0)
+        action = coord.request(leader, gsize, fin)
+        kind, a, b = action
+        if kind == farm.STOP:
+            continue
+        if kind == farm.SPLIT:
+            for i in range(a):
+                lo, hi = farm.split_range(gsize, a, i)
+                events.append((t, leader + lo, hi - lo, None))
+            continue
+        ch = chains[a]
+        idx = ch.cases[b]
+        assert gsize <= max(1, ch.N // 2)
+        order.append((t, ch.N))
+        solved.append(idx)
+        row = empty_row()
+        row["status"], row["seconds"], row["ranks"] = 1, 1.0, gsize
+        dt = (durations or {}).get(ch.N, 1.0) * (0.5 + rng.random()) * ch.g / gsize
+        events.append((t + dt, leader, gsize, (a, b, row, None, "")))
+    assert coord.active == 0
+    return solved, order, coord
+
+
+@pytest.mark.parametrize("nranks", [1, 2, 3, 7, 64])
+def test_coordinator_solves_each_case_once(nranks):
+    cases = _cases(q1s=(1e6, 2e6, 4e6), seeds=(1, 2), vs=(0.1, 1.0, 10.0), ps=range(1, 9))
+    N = {1e6: 256, 2e6: 1024, 4e6: 2048}
+    solved, order, coord = _simulate(nranks, cases, N, durations={256: 0.1, 1024: 1.0, 2048: 5.0})
+    assert sorted(solved) == list(range(len(cases)))
+    assert coord.nsolved == len(cases)
+    # largest first: no 2048 case starts after a smaller one started
+    first_small = min(t for t, n in order if n < 2048)
+    assert max(t for t, n in order if n == 2048) <= first_small + 1e-12 or nranks >= 8
+    if nranks == 64:
+        assert coord.steals > 0      # 12 chains of 2048^2 for 16 groups: chains must be split
+
+
+def test_coordinator_steals_when_idle():
+    cases = _cases(q1s=(1e6,), vs=(1.0,), ps=range(1, 9))     # one chain of 8
+    solved, _, coord = _simulate(2, cases, {1e6: 64})
+    assert sorted(solved) == list(range(8))
+    assert coord.steals >= 1
+
+
+def test_fault_targets():
+    cases = _cases()
+    t = farm.fault_targets(cases, f"1:3, 0:{cases[5].name},junk,2:nosuchcase")
+    assert t == {(1, 3), (0, 5)}
+    assert farm.fault_targets(cases, "") == set()
+
+
+def test_progress_line_marks_failures():
+    cases = _cases()
+    chains = farm.build_chains(cases, np.ones(len(cases), bool), {1e6: 64, 2e6: 64}.get, 1)
+    coord = farm.Coordinator(chains, cases, nranks=1)
+    row = np.zeros((), CASE_DTYPE)
+    row["status"], row["residual"], row["N"], row["ranks"] = -1, 3e-4, 64, 1
+    line = coord.progress_line(0, row, "max_it")
+    assert "NOT CONVERGED" in line and "3.00e-04" in line and f"/{len(cases)}]" in line
+
+
+# ------------------------------------------------------------------------------------------------
+# whole jobs
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """One serial run of the small job, shared by the comparisons."""
+    d = tmp_path_factory.mktemp("farm_ref")
+    job = write_job(d / "job.yaml")
+    t = time.time()
+    p = vecontact(0, ["run", job], cwd=d)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return d, cases_of(d / "out.h5"), time.time() - t, p.stdout
+
+
+def test_serial_run(reference):
+    d, ref, seconds, out = reference
+    assert len(ref) == 12 and (ref["status"] == 1).all()
+    assert (ref["ranks"] == 1).all() and set(ref["N"]) == {64, 128}
+    assert out.count("] q1=") == 12 and "ETA" in out
+    with h5py.File(d / "out.h5", "r") as f:
+        assert f.attrs["complete"]
+
+
+@pytest.mark.parametrize("rpc", [1, 2])
+def test_two_ranks_equal_serial(reference, tmp_path, rpc):
+    _, ref, _, _ = reference
+    job = write_job(tmp_path / "job.yaml", ranks_per_case=rpc)
+    p = vecontact(2, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    got = cases_of(tmp_path / "out.h5")
+    assert_same_results(ref, got)
+    assert set(got["ranks"]) == {rpc}
+    assert "busy fraction per rank: 0:" in p.stdout
+
+
+def test_dedicated_coordinator_and_three_ranks(reference, tmp_path):
+    """Without MPI_THREAD_MULTIPLE rank 0 only coordinates; 3 ranks make 3 groups of 1."""
+    _, ref, _, _ = reference
+    job = write_job(tmp_path / "job.yaml")
+    p = vecontact(2, ["run", job, "-o", "a.h5"], cwd=tmp_path,
+                  env={"VECONTACT_TEST_THREAD_LEVEL": "serialized"}, wrapper=True)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "dedicated" in p.stdout
+    assert_same_results(ref, cases_of(tmp_path / "a.h5"))
+    p = vecontact(3, ["run", job, "-o", "b.h5"], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert_same_results(ref, cases_of(tmp_path / "b.h5"))
+
+
+def test_kill_and_resume(reference, tmp_path):
+    _, ref, _, _ = reference
+    job = write_job(tmp_path / "job.yaml")
+    out = tmp_path / "out.h5"
+    proc = subprocess.Popen(command(2, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(
+        {"VECONTACT_STANDIN_SLEEP": "0.3"}), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        start_new_session=True)
+    n, t0 = 0, time.time()
+    try:
+        while time.time() - t0 < 60:
+            if out.exists():
+                try:
+                    n = len(cases_of(out))
+                except (OSError, KeyError):
+                    n = 0
+            if n >= 2 or proc.poll() is not None:
+                break
+            time.sleep(0.01)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+    before = cases_of(out)            # opens after kill -9
+    assert 2 <= len(before) < len(ref), "the run finished before it could be killed"
+    assert (before["status"] == 1).all()
+    # the finished cases are intact
+    keys = [tuple(r[k] for k in ("q1", "seed", "velocity", "pressure")) for r in ref]
+    sel = [keys.index(tuple(r[k] for k in ("q1", "seed", "velocity", "pressure"))) for r in before]
+    assert_same_results(ref[sel], before)
+    # resume: computes only the missing ones
+    p = vecontact(2, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert f"{len(before)} already finished, {len(ref) - len(before)} to solve" in p.stdout
+    assert p.stdout.count("] q1=") == len(ref) - len(before)
+    final = cases_of(out)
+    assert_same_results(ref, final)
+    assert len({tuple(r[k] for k in ("q1", "seed", "velocity", "pressure")) for r in final}) == len(final)
+    # and again: nothing left to do
+    p = vecontact(0, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0 and p.stdout.count("] q1=") == 0 and "0 to solve" in p.stdout
+
+
+def _refused(p):
+    assert p.returncode == 2, p.stdout + p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vecontact: error: output:"), p.stderr
+    assert "Traceback" not in p.stdout + p.stderr
+
+
+def test_refusals(reference, tmp_path):
+    d, ref, _, _ = reference
+    results = str(d / "out.h5")
+    # changed physics, same output file
+    changed = write_job(tmp_path / "changed.yaml", output=results, velocity=(0.01, 2.0))
+    p = vecontact(0, ["run", changed], cwd=tmp_path)
+    _refused(p)
+    assert "different physics" in p.stderr
+    # ... also on 2 ranks: the error reaches every rank, no hang
+    p = vecontact(2, ["run", changed], cwd=tmp_path, timeout=60)
+    _refused(p)
+    # a foreign HDF5 file
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["x"] = np.arange(3)
+    job = write_job(tmp_path / "job.yaml")
+    _refused(vecontact(0, ["run", job, "-o", str(foreign)], cwd=tmp_path))
+    # a truncated results file
+    trunc = tmp_path / "trunc.h5"
+    data = open(results, "rb").read()
+    with open(trunc, "wb") as f:
+        f.write(data[:len(data) // 2])
+    p = vecontact(2, ["run", job, "-o", str(trunc)], cwd=tmp_path, timeout=60)
+    _refused(p)
+    # nothing was touched
+    assert len(cases_of(results)) == len(ref)
+    assert open(trunc, "rb").read() == data[:len(data) // 2]
+
+
+def test_fault_on_one_rank_ends_the_job(tmp_path):
+    job = write_job(tmp_path / "job.yaml", ranks_per_case=2)
+    t = time.time()
+    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={farm.FAULT_ENV: "1:4"})
+    assert time.time() - t < 60
+    assert p.returncode != 0
+    text = p.stdout + p.stderr
+    assert text.count("Traceback (most recent call last)") == 1, text
+    assert "failed on rank 1" in p.stderr and "injected fault in case 4" in p.stderr
+    done = cases_of(tmp_path / "out.h5")       # the file keeps what was finished
+    assert 0 < len(done) < 12 and (done["status"] == 1).all()
+
+
+def test_fault_on_rank0_with_two_groups(tmp_path):
+    job = write_job(tmp_path / "job.yaml", ranks_per_case=1)
+    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={farm.FAULT_ENV: "0:0,1:0"})
+    assert p.returncode != 0
+    assert (p.stdout + p.stderr).count("Traceback (most recent call last)") == 1, p.stdout + p.stderr
+    assert "injected fault in case 0" in p.stderr
+
+
+def test_not_converged_recorded_and_fields(tmp_path):
+    job = write_job(tmp_path / "job.yaml", q1=(2.0e6,), velocity=(1.0,), max_iterations=1,
+                    fields=["pressure", "gap", "contact"], downsample=2)
+    p = vecontact(0, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    got = cases_of(tmp_path / "out.h5")
+    assert (got["status"] == -1).all() and not got["converged"].any()
+    assert p.stdout.count("NOT CONVERGED") == len(got)
+    assert np.isfinite(got["residual"]).all()
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        names = sorted(f["fields"])
+        assert len(names) == len(got)
+        g = f["fields"][names[0]]
+        assert g["pressure"].shape == (32, 32) and g["contact"].dtype == np.uint8
+        assert set(g) == {"pressure", "gap", "contact"} and g.attrs["downsample"] == 2
+
+
+def test_petsc_options_command_line_wins():
+    job = {"numerics": {"petsc": {"snes_type": "newtonls", "ksp_rtol": "0.1"}}}
+    got = farm._petsc_options(job, ["-snes_type", "vinewtonrsls", "-snes_monitor"])
+    assert got == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.1", "snes_monitor": None}
+    assert farm._petsc_options(job, ()) == job["numerics"]["petsc"]

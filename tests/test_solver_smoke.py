@@ -1,0 +1,117 @@
+"""Quick smoke tests of vecontact.solver (the full validation suite lives in tests/test_solver_*.py)."""
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from vecontact.core.pfft import SlabFFT
+from vecontact.physics.modulus import Elastic, HavriliakNegami, SLS
+from vecontact.solver import ContactResult, solve_contact
+
+COMM = MPI.COMM_SELF
+
+
+def _fft(N):
+    return SlabFFT(COMM, N, planner="estimate", wisdom_file=False)
+
+
+def _sinusoid(fft, L, D, two_d=False):
+    x = (np.arange(fft.row_start, fft.row_stop) * L / fft.N)[:, None]
+    y = (np.arange(fft.N) * L / fft.N)[None, :]
+    k = 2 * np.pi / L
+    if two_d:
+        return np.ascontiguousarray(D * np.cos(k * x) * np.cos(k * y))
+    return np.ascontiguousarray(D * np.cos(k * x) + 0 * y)
+
+
+def _random_surface(fft, L, hrms=1e-8, q1fac=8, seed=3):
+    N = fft.N
+    rng = np.random.default_rng(seed)
+    kx = np.fft.fftfreq(N, 1 / N)[:, None]
+    ky = np.fft.rfftfreq(N, 1 / N)[None, :]
+    k = np.sqrt(kx ** 2 + ky ** 2)
+    amp = np.where((k >= 1) & (k <= q1fac), np.maximum(k, 2.0) ** (-1.8), 0.0)
+    H = amp * np.exp(2j * np.pi * rng.random(amp.shape))
+    h = np.fft.irfft2(H, s=(N, N))
+    h *= hrms / h.std()
+    return np.ascontiguousarray(h[fft.row_start:fft.row_stop])
+
+
+@pytest.mark.parametrize("method", ["snes", "pk"])
+def test_westergaard(method):
+    N, L, D, E, nu = 128, 1e-4, 1e-7, 1e7, 0.5
+    fft = _fft(N)
+    h = _sinusoid(fft, L, D)
+    pstar = math.pi * E * D / ((1 - nu ** 2) * L)
+    pbar = 0.2 * pstar
+    r = solve_contact(fft, L, h, Elastic(E, nu), 0.0, pbar, method=method)
+    assert isinstance(r, ContactResult) and r.converged, r.summary()
+    a_exact = 2 / math.pi * math.asin(math.sqrt(pbar / pstar))
+    assert abs(r.area - a_exact) <= 2.0 / N
+    pmax = 2 * math.sqrt(pbar * pstar)
+    assert abs(r.pressure.max() - pmax) / pmax < 0.005
+    rr = pbar / pstar
+    gap_exact = D * (1 - rr + rr * math.log(rr))
+    assert abs(r.mean_gap - gap_exact) / gap_exact < 1e-3
+    assert abs(r.mu) < 1e-12
+
+
+def test_full_contact_mu_exact():
+    N, L, D = 64, 1e-4, 1e-8
+    fft = _fft(N)
+    h = _sinusoid(fft, L, D)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    k = 2 * np.pi / L
+    v = 1.0
+    sigma0 = 10 * abs(mod(k * v)) * k * D  # far into full contact
+    r = solve_contact(fft, L, h, mod, v, sigma0)
+    assert r.converged and r.area == 1.0
+    mu = k ** 2 * D ** 2 * mod(k * v).imag / (4 * (1 - mod.nu ** 2) * sigma0)
+    assert abs(r.mu - mu) / mu < 1e-6
+    assert abs(r.mu_geometric - mu) / mu < 1e-6
+
+
+def test_snes_equals_pk_elastic():
+    N, L = 128, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L)
+    mod = Elastic(3e6, 0.5)
+    sig = 2e3
+    a = solve_contact(fft, L, h, mod, 0.0, sig, method="snes")
+    b = solve_contact(fft, L, h, mod, 0.0, sig, method="pk")
+    assert a.converged and b.converged
+    assert np.count_nonzero((a.pressure > 0) != (b.pressure > 0)) <= 1
+    assert abs(a.mean_gap - b.mean_gap) / abs(b.mean_gap) < 1e-6
+    assert np.abs(a.pressure - b.pressure).max() / sig < 1e-5
+
+
+def test_pk_rejects_viscoelastic():
+    fft = _fft(32)
+    h = _random_surface(fft, 1e-4, q1fac=4)
+    with pytest.raises(ValueError):
+        solve_contact(fft, 1e-4, h, SLS(3e6, 3e8, 1e-6, 0.5), 1.0, 1e4, method="pk")
+
+
+def test_viscoelastic_mu_consistency_and_warm():
+    N, L = 128, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L, q1fac=8)
+    mod = SLS(3e6, 3e8, 1e-6, 0.5)
+    r = solve_contact(fft, L, h, mod, 20.0, 3e4)
+    assert r.converged, r.summary()
+    assert r.mu > 0 and abs(r.mu - r.mu_geometric) < 0.05 * r.mu
+    r2 = solve_contact(fft, L, h, mod, 20.0, 3.3e4, warm=r)
+    assert r2.converged and r2.area >= r.area
+    r3 = solve_contact(fft, L, h, mod, 20.0, 3.3e4, coarse=False)
+    assert abs(r3.mu - r2.mu) < 1e-6 * r2.mu
+
+
+def test_petsc_options_and_nonconvergence():
+    N, L = 64, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L, q1fac=6)
+    r = solve_contact(fft, L, h, Elastic(3e6), 0.0, 2e3, max_iterations=1, coarse=False)
+    assert not r.converged and r.residual > 1e-8 and isinstance(r.reason, str)
+    r = solve_contact(fft, L, h, Elastic(3e6), 0.0, 2e3, petsc_options=["-ksp_type gmres", "-ksp_gmres_restart 20"])
+    assert r.converged
