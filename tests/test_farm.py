@@ -1,8 +1,7 @@
 """The MPI task farm (vecontact.farm): scheduling rules, and whole jobs run as subprocesses on
 1 and 2 ranks: equivalence, kill -9 and resume, refusals, a fault on one rank, fields.
 
-The jobs are small (N = 64 and 128). When the real solver / surface generator are not importable
-the subprocesses use the stand-in of tests/scripts/farm_standin.py (test-only).
+The jobs are small (N = 64 and 128) and use the real surface generator and solver.
 """
 import os
 import signal
@@ -19,14 +18,12 @@ from mpi_util import ROOT, mpiexec
 
 SCRIPTS = os.path.join(ROOT, "tests", "scripts")
 sys.path.insert(0, SCRIPTS)
-import farm_standin  # noqa: E402
 
 from vecontact import farm  # noqa: E402
 from vecontact.cases import Case  # noqa: E402
 from vecontact.io.results import CASE_DTYPE, empty_row  # noqa: E402
 
 MAIN = os.path.join(SCRIPTS, "farm_main.py")
-REAL = farm_standin.real_available()
 
 
 # ------------------------------------------------------------------------------------------------
@@ -50,7 +47,7 @@ def write_job(path, output="out.h5", q1=(2.0e6, 4.0e6), velocity=(0.01, 1.0), se
 
 def env_for(extra=None):
     env = dict(os.environ)
-    for k in ("PMI_RANK", "PMI_SIZE", farm.FAULT_ENV, "VECONTACT_FARM_STANDIN"):
+    for k in ("PMI_RANK", "PMI_SIZE", farm.FAULT_ENV):
         env.pop(k, None)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     env.setdefault("OMP_NUM_THREADS", "1")
@@ -59,9 +56,9 @@ def env_for(extra=None):
 
 
 def command(nranks, args, wrapper=False):
-    """`python -m vecontact ARGS`, or tests/scripts/farm_main.py (stand-in solver when the real one is
-    missing; test-only MPI thread level) when the real solver is missing or ``wrapper``."""
-    base = [sys.executable] + ([MAIN] if wrapper or not REAL else ["-m", "vecontact"]) + list(args)
+    """`python -m vecontact ARGS`, or with ``wrapper`` tests/scripts/farm_main.py (test-only MPI
+    thread level)."""
+    base = [sys.executable] + ([MAIN] if wrapper else ["-m", "vecontact"]) + list(args)
     return base if nranks == 0 else [mpiexec(), "-n", str(nranks)] + base
 
 
@@ -253,8 +250,7 @@ def test_kill_and_resume(reference, tmp_path):
     _, ref, _, _ = reference
     job = write_job(tmp_path / "job.yaml")
     out = tmp_path / "out.h5"
-    proc = subprocess.Popen(command(2, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(
-        {"VECONTACT_STANDIN_SLEEP": "0.3"}), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    proc = subprocess.Popen(command(2, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         start_new_session=True)
     n, t0 = 0, time.time()
     try:

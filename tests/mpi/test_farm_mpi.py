@@ -1,10 +1,7 @@
 """The task farm in-process on the launching communicator (``mpiexec -n 2 python -m pytest tests/mpi``).
-
-Uses the real solver when importable, else the test-only stand-in of tests/scripts/farm_standin.py.
 """
 import os
 import shutil
-import sys
 import tempfile
 import traceback
 
@@ -12,15 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "scripts"))
-import farm_standin  # noqa: E402
-
-farm_standin.install()
-
-from vecontact import job as jobs  # noqa: E402
-from vecontact.io.results import read_cases  # noqa: E402
-from vecontact.runner import run  # noqa: E402
+from vecontact import job as jobs
+from vecontact.io.results import read_cases
+from vecontact.runner import run
 
 
 @pytest.fixture
