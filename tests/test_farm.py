@@ -58,7 +58,8 @@ def env_for(extra=None):
 def command(nranks, args, wrapper=False):
     """`python -m vecontact ARGS`, or with ``wrapper`` tests/scripts/farm_main.py (test-only MPI
     thread level)."""
-    base = [sys.executable] + ([MAIN] if wrapper else ["-m", "vecontact"]) + list(args)
+    args = list(args) + (["--no-plot"] if args and args[0] == "run" else [])   # figures: not tested here
+    base = [sys.executable] + ([MAIN] if wrapper else ["-m", "vecontact"]) + args
     return base if nranks == 0 else [mpiexec(), "-n", str(nranks)] + base
 
 
@@ -250,8 +251,8 @@ def test_kill_and_resume(reference, tmp_path):
     _, ref, _, _ = reference
     job = write_job(tmp_path / "job.yaml")
     out = tmp_path / "out.h5"
-    proc = subprocess.Popen(command(2, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        start_new_session=True)
+    proc = subprocess.Popen(command(2, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     n, t0 = 0, time.time()
     try:
         while time.time() - t0 < 60:

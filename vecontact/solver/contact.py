@@ -53,9 +53,13 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     method : "snes" (PETSc semismooth Newton, any modulus) or "pk" (Polonsky-Keer CG, elastic only:
         ValueError if Im E(q_x v) != 0 anywhere on the grid)
     petsc_options : dict or list of "-key value" strings for the SNES/KSP (solver prefix added)
-    warm : previous ContactResult on the same grid (its gap, or for "pk" its pressure, starts the
-        iteration; coarse grids are then skipped)
-    coarse : solve on N/4 and N/2 first (snes only; needs N divisible by 2 with N/2 >= 128)
+    warm : previous ContactResult on the same grid and decomposition (previous load or velocity of a
+        sweep).  snes: its gap, restricted to the coarsest grid, replaces the cold start there (with
+        coarse=False the fine grid restarts from it directly); pk: its pressure (rescaled to the new
+        sigma0) starts the CG.
+    coarse : snes only; solve on N/8, N/4, N/2 (those >= 128) first, each warm-starting the next by
+        trigonometric interpolation + 4 projected-Jacobi sweeps (see warmstart.py); the coarse grids
+        hold all the roughness of null-band surfaces.  Ignored when N is too small.
     max_iterations : Newton iterations (snes, fine grid; default 100) or CG iterations (pk, default
         20000)
     store : which local fields to return ("pressure", "gap", "displacement")
@@ -137,7 +141,6 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
             g0 = bearing_guess(op)
         maxit = 100 if max_iterations is None else int(max_iterations)
         mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
-        bf = fft.transforms
         ghat, phat, act, info = ncp_solve(op, g0, tol=tolerance, petsc_options=petsc_options,
                                           max_it=maxit, monitor=mon, lin_rtol=LIN_RTOL)
         levels_info.append(dict(N=fft.N, iterations=info["iterations"],
@@ -149,7 +152,6 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     p_out = np.where(act, phat * op.sigma0, 0.0)
     g_out = np.where(act, 0.0, ghat * op.ell)
     scal, w = postprocess(op, p_out, g_out)
-    # fine-grid transforms not attributed to a coarse level
     for n, (f, t0c) in coarse_start.items():
         by_level[n] = (f.transforms - t0c) / 2.0
     by_level[fft.N] = (fft.transforms - tr0) / 2.0

@@ -13,12 +13,15 @@ and preconditioner (Python PC, one FFT pair): identity on C, the Fourier-diagona
 c = 1/m on F plus a rigid shift (so that the correction does not move the contact set on average):
     B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C)
 KSP: FGMRES (right preconditioning: the residual norm is the true one; no extra PC application to
-form the solution).  Linear tolerance: loose (``lin_rtol``, default 0.1) while the active set changes
-between Newton steps, tight once it stops changing (the step is then exact, PDAS converges in one
-more step); absolute tolerance derived from the convergence tolerance.  ``-snes_ksp_ew`` switches to
-Eisenstat-Walker forcing instead.
+form the solution), restart 60 capped by memory (RESTART_MEMORY bytes per rank).  Linear tolerance:
+loose (``lin_rtol``, default 0.1, at most LIN_MAXIT_CHANGING = 20 iterations) while the active set
+changes between Newton steps, "exact" once it stops changing (the step is then the solution, PDAS
+converges in one more step); the absolute tolerance tol/kappa in the 2-norm bounds the max-norm
+complementarity measure.  ``-snes_ksp_ew`` or ``-ksp_rtol``/``-ksp_atol`` in petsc_options switch
+this rule off (Eisenstat-Walker / the user's tolerances).  Convergence is decided by our own scale-free
+test (operator.py), installed with SNESSetConvergenceTest.
 
-Alternatives selectable with ``petsc_options`` (measured, see /tmp/notes_solver.md):
+Alternatives selectable with ``petsc_options`` (measured: see benchmarks/solver.py and the README):
 ``-snes_type vinewtonrsls`` (PETSc reduced-space VI on the NCP written as bounds g^ >= 0 with residual
 p^(g^); Jacobian m, createSubMatrix gives the free-set block, the PC is the compliance on the free set
 with the rigid shift): converges, ~1.3x the FFT pairs of the default from a cold start.
