@@ -362,12 +362,12 @@ LIN_MAXIT_CHANGING = 20  # cap of the KSP iterations of Newton steps whose activ
 
 def default_restart(nloc, budget=None):
     """FGMRES restart length: 60, capped so that its 2 (restart + 1) vectors fit in RESTART_MEMORY
-    bytes per rank (4096^2 on 2 ranks: 37)."""
+    bytes per rank (4096^2 on 2 ranks: 21)."""
     budget = RESTART_MEMORY if budget is None else budget
     return int(max(10, min(60, budget // (16 * max(nloc, 1)) - 1)))
 
 
-RESTART_MEMORY = 5e9
+RESTART_MEMORY = 3e9
 
 
 def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, restart=None,
