@@ -1,0 +1,198 @@
+"""The semismooth Newton step, solved on the contact set (a PETSc Python PC with an inner KSP).
+
+Newton system of the gap formulation (snes.py) for the contact set C (free set F):
+
+    x_C = r_C,        (m x)_F = kappa r_F          (nondimensional: gap in h_rms, pressure in sigma0)
+
+Writing s = m x (the pressure increment: zero mean, known on F: s_F = kappa r_F) and x = c s + e (c = 1/m,
+e the rigid shift, m and c have no q = 0 mode) turns it into a problem for s_C only:
+
+    (c s)_C + e = r_C,        sum_C s_C = -sum_F s_F.
+
+With s_C = s0 + y (s0 uniform, carrying the sum) and P the removal of the mean over C, y solves
+
+    A y = b,    A = P c_CC P,    b = P (r_C - (c s~)_C),   s~ = s_F on F, s0 on C,
+
+an operator on the zero-sum vectors of C: the restricted compliance (single-layer operator of the
+contact set), positive definite in the elastic case, non-symmetric but coercive for a viscoelastic
+modulus.  It is preconditioned by the restricted stiffness B = P m_CC P (the opposite-order, "Calderon"
+preconditioner: m and c are exact inverses on the full grid, the restriction only perturbs it near the
+contact edges, so the iteration count grows only mildly with N).  The Krylov vectors live on C: at
+A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little next to the FFTs.
+
+Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B).  The inner KSP has the
+options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning, so its residual norm
+is the gap error on C in units of h_rms).
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+__all__ = ["ContactSetStep", "INNER_RESTART_MAX"]
+
+INNER_RESTART_MAX = 100
+INNER_MEMORY = 1.5e9   # bytes per rank for the inner FGMRES basis (2 (restart + 1) vectors)
+
+
+def inner_restart(n_local):
+    """FGMRES restart of the inner solve: INNER_RESTART_MAX, capped by INNER_MEMORY bytes per rank."""
+    return int(max(10, min(INNER_RESTART_MAX, INNER_MEMORY // (16 * max(n_local, 1)) - 1)))
+
+
+class _Restricted:
+    """y = P (multiplier P x)_C for a Fourier multiplier ``multiplier`` (Python Mat and Python PC of the inner KSP)."""
+
+    def __init__(self, step, multiplier):
+        self.step = step
+        self.multiplier = multiplier
+
+    def _apply(self, x, y):
+        s = self.step
+        xa = x.getArray(readonly=True)
+        buf = s.buf
+        buf.flat[s.idx] = xa
+        s.fft.apply(buf, self.multiplier, s.out)
+        ya = y.getArray()
+        np.take(s.out.ravel(), s.idx, out=ya)
+        ya -= s.mean_C(ya)
+
+    def mult(self, mat, x, y):
+        self._apply(x, y)
+
+    def apply(self, pc, x, y):
+        self._apply(x, y)
+
+    def setUp(self, pc):
+        pass
+
+
+class ContactSetStep:
+    """Python PC of the outer (Newton) KSP: y = J^{-1} x exactly, up to the inner KSP's tolerance.
+
+    ``set_active(act)`` must be called with the contact set of the current Jacobian before ``apply``.
+    Attributes after each apply: ``last_iterations``; ``iterations`` accumulates them.
+    """
+
+    def __init__(self, op, kappa, PETSc, prefix, restart=None):
+        self.op = op
+        self.fft = fft = op.fft
+        self.comm = fft.comm
+        self.kappa = float(kappa)
+        self.PETSc = PETSc
+        self.shape = fft.local_real_shape
+        self.buf = fft.real_array()     # zero outside C (maintained by set_active)
+        self.out = fft.real_array()
+        self.w = fft.real_array()
+        self.freef = fft.real_array()   # 1.0 on F, 0.0 on C
+        self.idx = np.zeros(0, dtype=np.intp)
+        self.n_C = 0
+        self.iterations = 0
+        self.last_iterations = 0
+        self.restart = restart
+        self._A = self._B = None
+        self.ksp = PETSc.KSP().create(comm=self.comm)
+        self.ksp.setOptionsPrefix(prefix + "contact_")
+        self._prefix = prefix + "contact_"
+        self._configured = False
+        self._own_keys = []
+
+    # ------------------------------------------------------------------ helpers
+    def mean_C(self, a):
+        """Mean over the (global) contact set of the C-vector ``a``."""
+        loc = np.array([float(np.sum(a))])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
+        return loc[0] / self.n_C
+
+    def _sum(self, a):
+        loc = np.array([float(np.sum(a))])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
+        return loc[0]
+
+    def set_active(self, act):
+        """New contact set ``act`` (bool, local rows; non-empty globally)."""
+        PETSc = self.PETSc
+        self.buf.flat[self.idx] = 0.0
+        idx = np.flatnonzero(act.ravel())
+        n_loc = int(idx.size)
+        n_C = self.comm.allreduce(n_loc, op=MPI.SUM)
+        if n_C == 0:
+            raise ValueError("empty contact set")
+        np.logical_not(act, out=self.freef, casting="unsafe")
+        self.idx = idx
+        resize = self._A is None or self._A.getLocalSize()[0] != n_loc
+        if self.comm.size > 1:   # collective: every rank must take the same branch
+            resize = self.comm.allreduce(resize, op=MPI.LOR)
+        if resize:
+            if self._A is not None:
+                self.ksp.reset()          # a KSP cannot change its operator's size otherwise
+                for obj in (self._A, self._b, self._y):
+                    obj.destroy()
+            self._A = PETSc.Mat().createPython(((n_loc, n_C), (n_loc, n_C)),
+                                               context=_Restricted(self, self.op.c), comm=self.comm)
+            self._A.setUp()
+            self._b = self._A.createVecLeft()
+            self._y = self._A.createVecRight()
+        self.n_C = n_C
+        self.ksp.setOperators(self._A)
+        if not self._configured:
+            restart = self.restart
+            if restart is None:
+                restart = self.comm.allreduce(inner_restart(n_loc), op=MPI.MIN)
+            opts = PETSc.Options()
+            for k, v in (("ksp_type", "fgmres"), ("ksp_gmres_restart", str(restart))):
+                if not opts.hasName(self._prefix + k):
+                    opts[self._prefix + k] = v
+                    self._own_keys.append(self._prefix + k)
+            pc = self.ksp.getPC()
+            pc.setType("python")
+            pc.setPythonContext(_Restricted(self, self.op.m))
+            self.ksp.setFromOptions()
+            self._configured = True
+
+    def set_tolerances(self, rtol, atol, max_it):
+        self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=max_it)
+
+    # ------------------------------------------------------------------ PC interface
+    def setUp(self, pc):
+        pass
+
+    def apply(self, pc, x, y):
+        fft = self.fft
+        idx = self.idx
+        r = x.getArray(readonly=True).reshape(self.shape)
+        xo = y.getArray().reshape(self.shape)
+        w = self.w
+        np.multiply(r, self.freef, out=w)
+        w *= self.kappa                                   # s_F = kappa r_F, 0 on C
+        s0 = -self._sum(w) / self.n_C
+        w.flat[idx] = s0                                  # s~
+        fft.apply(w, self.op.c, self.out)                 # c s~
+        b = self._b.getArray()
+        np.take(r.ravel(), idx, out=b)
+        b -= np.take(self.out.ravel(), idx)
+        b -= self.mean_C(b)
+        self._y.set(0.0)
+        self.ksp.solve(self._b, self._y)
+        self.last_iterations = self.ksp.getIterationNumber()
+        self.iterations += self.last_iterations
+        w.flat[idx] += self._y.getArray(readonly=True)    # s
+        fft.apply(w, self.op.c, xo)                       # c s
+        # rigid shift; x = c s + e on C too, so that m x = s exactly: the inner residual stays a
+        # small gap error on C instead of turning into pressures (m rho) on F that upset the set
+        e = self.mean_C(np.take(r.ravel(), idx) - np.take(xo.ravel(), idx))
+        xo += e
+
+    def release(self):
+        for obj in (self._A, getattr(self, "_b", None), getattr(self, "_y", None), self.ksp):
+            if obj is not None:
+                obj.destroy()
+        opts = self.PETSc.Options()
+        for k in self._own_keys:
+            try:
+                opts.delValue(k)
+            except Exception:
+                pass
+        self._own_keys = []
