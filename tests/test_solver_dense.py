@@ -121,3 +121,17 @@ def test_warm_start_from_other_load():
     first, _ = solve_full(h, L_PAPER, modulus(name), v, 5e4, fft=fft)
     res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, fft=fft, warm=first)
     compare(res, f, ref, h, sigma0, name, "snes warm")
+
+
+@pytest.mark.parametrize("step", ["contact", "free"])
+@pytest.mark.parametrize("v,sigma0", [(1.0, 2e4), (30.0, 5e4)])
+def test_newton_step_modes_vs_dense(step, v, sigma0):
+    """Both ways of solving the Newton step (on the contact set / on the whole grid, chosen by area in
+    ``auto``) forced for a whole solve: the same exact solution."""
+    N, name = 32, "hn"
+    h = surface(N)
+    ref = reference(N, name, v, sigma0)
+    opts = {"contact_step": step}
+    res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF, coarse=False,
+                        petsc_options=opts)
+    compare(res, f, ref, h, sigma0, name, f"snes step={step} v={v}")

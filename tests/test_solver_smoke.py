@@ -115,3 +115,10 @@ def test_petsc_options_and_nonconvergence():
     assert not r.converged and r.residual > 1e-8 and isinstance(r.reason, str)
     r = solve_contact(fft, L, h, Elastic(3e6), 0.0, 2e3, petsc_options=["-ksp_type gmres", "-ksp_gmres_restart 20"])
     assert r.converged
+
+
+def test_bad_step_mode_is_refused():
+    fft = _fft(32)
+    h = _random_surface(fft, 1e-4, q1fac=4)
+    with pytest.raises(ValueError, match="contact_step"):
+        solve_contact(fft, 1e-4, h, Elastic(3e6), 0.0, 2e3, petsc_options={"contact_step": "sideways"})

@@ -203,13 +203,6 @@ class ResultsFile:
     def add_row(self, row):
         self.rows[case_key(row)] = np.array(row, dtype=CASE_DTYPE)[()]
 
-    def fields_dir(self):
-        return self.path + ".fields"
-
-    def add_fields(self, case_name, arrays, attrs):
-        """Write one case's fields to their own file (atomically); link it at next commit."""
-        self.link_fields(case_name, write_fields_file(self.path, case_name, arrays, attrs))
-
     def link_fields(self, case_name, rel):
         """Link a fields file already written by :func:`write_fields_file` (any rank) at next commit."""
         self.field_links[case_name] = rel

@@ -88,6 +88,7 @@ class ContactSetStep:
         self.idx = np.zeros(0, dtype=np.intp)
         self.n_C = 0
         self.iterations = 0
+        self.solves = 0
         self.last_iterations = 0
         self.restart = restart
         self._A = self._B = None
@@ -178,6 +179,7 @@ class ContactSetStep:
         self.ksp.solve(self._b, self._y)
         self.last_iterations = self.ksp.getIterationNumber()
         self.iterations += self.last_iterations
+        self.solves += 1
         w.flat[idx] += self._y.getArray(readonly=True)    # s
         fft.apply(w, self.op.c, xo)                       # c s
         # rigid shift; x = c s + e on C too, so that m x = s exactly: the inner residual stays a

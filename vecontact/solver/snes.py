@@ -9,19 +9,28 @@ Default method: semismooth Newton (= primal-dual active set) on the min-residual
 with SNES newtonls + basic (full-step) line search.  Active (contact) set C = {p^ >= kappa g^} of the
 current iterate, free set F its complement.  Generalised Jacobian (Python Mat, one FFT pair)
     J x = P_C x + P_F m x / kappa.
-The Newton step J x = r is solved on the contact set (contactset.py): KSP ``preonly`` with a Python
-PC that eliminates the free set exactly and runs an inner FGMRES (options prefix ``contact_``) on the
-restricted compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on
-C only (A/A0 of the grid), 2 FFT pairs per inner iteration.  Inner tolerance: loose (``lin_rtol``,
-default 0.1, at most LIN_MAXIT_CHANGING = 20 iterations) while the active set changes between Newton
-steps, "exact" once it stops changing (the step is then the solution, PDAS converges in one more step):
-the absolute tolerance INNER_ATOL_FACTOR tol/kappa on the 2-norm of the gap error on C (h_rms).
-``-snes_ksp_ew``, ``-contact_ksp_rtol`` or ``-contact_ksp_atol`` in petsc_options switch this rule off.
+The Newton step J x = r is solved in one of two ways, chosen before every step from the size of the
+current contact set (``contact_step auto``, the default; ``contact_step contact|free`` forces one;
+``contact_step_area`` sets the switch, CONTACT_STEP_AREA = 0.15):
+* A/A0 <= 0.15: on the contact set (contactset.py).  KSP ``preonly`` with a Python PC that eliminates
+  the free set exactly and runs an inner FGMRES (options prefix ``contact_``) on the restricted
+  compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on C
+  (A/A0 of the grid): orthogonalisation is cheap; 2 FFT pairs per inner iteration.
+* A/A0 > 0.15: on the whole grid.  KSP FGMRES (right preconditioning, restart 60 capped by memory)
+  with the Python PC "identity on C, Fourier-diagonal compliance on F plus a rigid shift"
+  B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C); 2 FFT pairs per iteration.
+Measured (paper surfaces, HN compound, 1 rank): the contact-set step needs 20-45 % fewer FFT pairs
+and 3-4x less time below A/A0 ~ 15 %; above ~ 30 % at v = 10 m/s its inexact steps (gap errors on C)
+make the active set wander and PDAS needs 40+ steps, where the grid step converges in 10-18.
+Linear tolerance (either way): loose (``lin_rtol``, default 0.1, at most LIN_MAXIT_CHANGING = 20
+iterations) while the active set changes between Newton steps; tightened 10x (and the cap doubled)
+whenever a step makes no progress; "exact" once the set stops changing (the step is then the
+solution, PDAS converges in one more step), with the absolute tolerance tol/kappa (free-set residual,
+h_rms units; the 2-norm bounds the max-norm measure) or INNER_ATOL_FACTOR tol/kappa (gap error on C).
+``-snes_ksp_ew``, ``-ksp_rtol``/``-ksp_atol`` or ``-contact_ksp_rtol``/``-contact_ksp_atol`` in
+petsc_options switch this rule off.  ``-ksp_type`` (default fgmres) applies to the grid steps.
 Convergence is decided by our own scale-free test (operator.py), installed with
-SNESSetConvergenceTest.  Measured against the previous default (FGMRES on the whole grid with the
-free-set compliance as preconditioner, same Newton iteration): 1024^2, v = 0.01 m/s, A/A0 = 2 %:
-157 instead of 243 fine-grid FFT pairs and 2.2 s instead of 7 s; v = 10 m/s, 4 %: 421 instead of 591
-pairs, 4.5 s instead of 18 s (see benchmarks/solver.py).
+SNESSetConvergenceTest.
 
 Alternatives selectable with ``petsc_options`` (measured: see benchmarks/solver.py and the README):
 ``-snes_type vinewtonrsls`` (PETSc reduced-space VI on the NCP written as bounds g^ >= 0 with residual
@@ -80,12 +89,18 @@ class _State:
         self.tmp2 = fft.real_array()
         self.act = np.zeros(self.shape, dtype=bool)
         self.m_k = op.m / self.kappa        # Jacobian multiplier on the free rows
+        self.c_k = op.c * self.kappa        # free-set preconditioner multiplier
+        self.freef = fft.real_array()       # 1.0 on F, 0.0 on C
+        self.nact = 0
+        self.mode = None                    # "contact" | "free": where the Newton step is solved
         self.act_prev = None
         self.nchg_history = []
         self.lin_history = []
         self.history = []
         self.n2 = float(op.N) ** 2
         self.step = None
+        self.ksp = None
+        self.maxit_changing = LIN_MAXIT_CHANGING
 
     # ------------------------------------------------------------------ helpers
     def _view(self, vec, readonly=True):
@@ -135,10 +150,19 @@ class _State:
         else:
             nchg = comm.allreduce(int(np.count_nonzero(act != self.act_prev)), op=MPI.SUM)
         self.nchg_history.append(nchg)
-        self.lin_history.append(self.step.iterations)
+        self.lin_history.append(self.linear_iterations(snes))
         self.act_prev = act
         self.act = act
-        self.step.set_active(act)
+        self.nact = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+        mode = self.step_mode
+        if mode == "auto":
+            mode = "contact" if self.nact <= self.step_area * self.n2 else "free"
+        if mode != self.mode:
+            self._switch(mode)
+        if mode == "contact":
+            self.step.set_active(act)
+        else:
+            np.logical_not(act, out=self.freef, casting="unsafe")
         if self.lin_rtol is not None:
             if nchg == 0 and len(self.nchg_history) >= 2 and self.nchg_history[-2] == 0:
                 # the previous step was already solved "exactly" on this active set and did not
@@ -148,10 +172,35 @@ class _State:
                 # no progress (after the first step, which often overshoots): inexact steps can make
                 # the active set cycle; solve tighter
                 self.lin_rtol = max(0.1 * self.lin_rtol, LIN_RTOL_MIN)
-            atol = self.atol
+                self.maxit_changing = min(2 * self.maxit_changing, self.ksp_max_it)
+            # both tolerances bound the max-norm measure (see ncp_solve)
+            atol = self.atol * (INNER_ATOL_FACTOR if mode == "contact" else 1.0)
             rtol = 1e-14 if nchg == 0 else self.lin_rtol
-            maxit = self.ksp_max_it if nchg == 0 else min(self.ksp_max_it, LIN_MAXIT_CHANGING)
-            self.step.set_tolerances(rtol, atol, maxit)
+            maxit = self.ksp_max_it if nchg == 0 else min(self.ksp_max_it, self.maxit_changing)
+            if mode == "contact":
+                self.step.set_tolerances(rtol, atol, maxit)
+            else:
+                self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=maxit)
+
+    def linear_iterations(self, snes):
+        """Krylov iterations so far: outer FGMRES (free-set steps) + inner (contact-set steps; the
+        outer preonly KSP counts each of those solves as one iteration)."""
+        return snes.getLinearSolveIterations() - self.step.solves + self.step.iterations
+
+    def _switch(self, mode):
+        """Solve the next Newton steps on the contact set (KSP preonly + ContactSetStep) or on the
+        grid (KSP FGMRES + _FreeSetPC)."""
+        pc = self.ksp.getPC()
+        if mode == "contact":
+            self.ksp.setType("preonly")
+            pc.setPythonContext(self.step)
+        else:
+            self.ksp.setType(self.free_ksp_type)
+            if self.free_ksp_type in ("fgmres", "gmres"):
+                self.ksp.setGMRESRestart(self.restart)
+            pc.setPythonContext(self.free_pc)
+        self.mode = mode
+        self.modes.append((len(self.nchg_history) - 1, mode))
 
     def converged(self, snes, it, norms):
         PETSc = petsc()
@@ -287,6 +336,31 @@ class _ViPrecond:
         st.fft.apply(st._view(x), st.op.c, st._view(y, readonly=False))
 
 
+class _FreeSetPC:
+    """Newton step on the whole grid (outer FGMRES), for large contact sets:
+    B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C), identity on C and the compliance on F with a rigid
+    shift (the correction does not move the contact set on average)."""
+
+    def __init__(self, st):
+        self.st = st
+
+    def setUp(self, pc):
+        pass
+
+    def apply(self, pc, x, y):
+        st = self.st
+        ra = st._view(x)
+        ya = st._view(y, readonly=False)
+        act = st.act
+        np.multiply(ra, st.freef, out=st.tmp2)           # P_F r
+        st.fft.apply(st.tmp2, st.c_k, ya)                # kappa c P_F r
+        buf = np.array([np.sum(ya, where=act)])
+        if st.fft.size > 1:
+            st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+        ya -= buf[0] / st.nact                           # rigid shift: <.>_C = 0
+        np.copyto(ya, ra, where=act)                     # identity on the contact set
+
+
 def _apply_options(PETSc, prefix, defaults, user):
     """Put defaults (unless given by the user) and the user options into the options database."""
     opts = PETSc.Options()
@@ -358,6 +432,7 @@ def default_restart(nloc, budget=None):
 
 RESTART_MEMORY = 3e9
 LIN_RTOL_MIN = 1e-6
+CONTACT_STEP_AREA = 0.15   # auto: contact-set steps while A/A0 <= this, free-set steps above
 INNER_ATOL_FACTOR = 5.0   # measured: 0.5 costs ~5 % more pairs, 20 one more Newton step
 
 
@@ -386,11 +461,20 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
     st.monitor = monitor
     st.ksp_max_it = int(user_items.get("contact_ksp_max_it", ksp_max_it))
     # inner residual = gap error on C (h_rms); the measure sees its image under m, |m rho| <= 2 kappa |rho|
-    st.atol = INNER_ATOL_FACTOR * tol / st.kappa
+    # 2-norm >= max-norm: a free-set step solved to tol/kappa meets the measure; a contact-set step's
+    # residual is a gap error on C whose image under m is what the measure sees (INNER_ATOL_FACTOR)
+    st.atol = tol / st.kappa
+    st.restart = int(user_items.get("ksp_gmres_restart", restart))
+    st.free_ksp_type = user_items.get("ksp_type", "fgmres")
+    st.step_mode = user_items.get("contact_step", "auto")
+    if st.step_mode not in ("auto", "contact", "free"):
+        raise ValueError(f"petsc option contact_step: expected auto, contact or free, got {st.step_mode!r}")
+    st.step_area = float(user_items.get("contact_step_area", CONTACT_STEP_AREA))
+    st.modes = []
     defaults = {
         "snes_type": "newtonls",
         "snes_linesearch_type": "basic",
-        "ksp_type": "preonly",
+        "ksp_gmres_restart": str(restart),
         "snes_max_linear_solve_fail": "1000",
     }
     if vi:
@@ -420,6 +504,7 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
             pc.setPythonContext(_ViPrecond(st))
         else:
             st.step = ContactSetStep(op, st.kappa, PETSc, prefix)
+            st.free_pc = _FreeSetPC(st)
             pc.setPythonContext(st.step)
         snes.setTolerances(max_it=int(max_it))
         snes.setConvergenceTest(st.converged)
@@ -430,12 +515,13 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
             hi.set(PETSc.INFINITY)
             snes.setVariableBounds(lo, hi)
         snes.setFromOptions()
+        st.ksp = ksp
         t0 = time.perf_counter()
         snes.solve(None, X)
         reason_code = snes.getConvergedReason()
         reason = _reason_name(PETSc, PETSc.SNES.ConvergedReason, reason_code)
         its = snes.getIterationNumber()
-        lits = snes.getLinearSolveIterations() if vi else st.step.iterations
+        lits = snes.getLinearSolveIterations() if vi else st.linear_iterations(snes)
         g = X.getArray(readonly=True).reshape(fft.local_real_shape)
         st.ensure(g)
         act = st.p >= op.kappa * st.g
@@ -447,7 +533,7 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
         info = dict(iterations=int(its), linear_iterations=int(lits), converged=converged,
                     reason="converged" if converged else reason.lower(), residual=float(res),
                     measures=meas, history=st.history, nchg=st.nchg_history,
-                    lin_history=st.lin_history + [int(lits)],
+                    lin_history=st.lin_history + [int(lits)], modes=st.modes,
                     seconds=time.perf_counter() - t0, snes_type=snes.getType(), ksp_type=ksp.getType())
         for obj in (X, Fv, J):
             obj.destroy()
