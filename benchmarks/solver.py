@@ -3,6 +3,7 @@
 Usage (from the repository root):
     python benchmarks/solver.py [--max-n 4096] [--quick] [--ranks 2] [--areas 0.01,0.05,0.3]
                                 [--velocities 0.01,10] [--no-pk] [--out results.jsonl]
+                                [--areas-4096 0.05] [--pk-max-n 2048]
 
 Starts its own MPI runs (``mpiexec -n RANKS python benchmarks/solver.py --worker N ...``), one per grid
 size, on the paper's surfaces (CONVENTIONS section 2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
@@ -157,6 +158,9 @@ def main():
     ap.add_argument("--velocities", type=str, default="0.01,10")
     ap.add_argument("--quick", action="store_true", help="A/A0 ~ 5 %% only, no PK at 4096")
     ap.add_argument("--no-pk", dest="pk", action="store_false")
+    ap.add_argument("--areas-4096", type=str, default=None,
+                    help="comma list of A/A0 targets for N >= 4096 only (default: --areas)")
+    ap.add_argument("--pk-max-n", type=int, default=1 << 30, help="no Polonsky-Keer above this N")
     ap.add_argument("--tol", type=float, default=1e-8)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--planner", default="measure")
@@ -183,13 +187,14 @@ def main():
     for N in sizes:
         ranks = 2 if N >= 4096 else args.ranks
         cmd = [_mpiexec(), "-n", str(ranks), sys.executable, os.path.abspath(__file__), "--worker",
-               "--n", str(N), "--areas", ",".join(map(str, args.areas)),
+               "--n", str(N),
+               "--areas", args.areas_4096 if (N >= 4096 and args.areas_4096) else ",".join(map(str, args.areas)),
                "--velocities", ",".join(map(str, args.velocities)), "--tol", str(args.tol),
                "--seed", str(args.seed), "--planner", args.planner,
                "--fft-repeats", str(args.fft_repeats), "--calib-steps", str(args.calib_steps)]
         if args.quick:
             cmd.append("--quick")
-        if not args.pk:
+        if not args.pk or N > args.pk_max_n:
             cmd.append("--no-pk")
         print(f"# N={N} on {ranks} ranks ...", flush=True)
         t = time.time()
