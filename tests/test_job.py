@@ -65,6 +65,9 @@ BAD = [
     (("numerics.solver", "pk"), "numerics.solver"),              # PK with a viscoelastic solid
     (("numerics.fields", ["stress"]), "numerics.fields"),
     (("numerics.enabled", "yes"), "numerics.enabled"),
+    (("numerics.petsc", {"contact_step": "sideways"}), "numerics.petsc"),
+    (("numerics.petsc", "-contact_step_area 2"), "numerics.petsc"),
+    (("numerics.petsc", {"contact_step_area": "x"}), "numerics.petsc"),
     (("output", "results.txt"), "output"),
     (("surface", ...), "surface"),
 ]
@@ -177,3 +180,18 @@ def test_paper_pressures_span_the_area_range():
             assert len(area) == 12
             assert area.min() == pytest.approx(0.005, rel=1e-3)
             assert area.max() == pytest.approx(0.6, rel=1e-3)
+
+
+def test_cli_bad_petsc_option_on_command_line(tmp_path):
+    """A solver option of vecontact's own passed on the command line is checked before any solve."""
+    job = yaml.safe_load(open(os.path.join(ROOT, "jobs", "demo.yaml")))
+    job["output"] = str(tmp_path / "out.h5")
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path), "--no-plot",
+                           "-contact_step", "sideways"], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vecontact: error: numerics.petsc"), proc.stderr
+    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]

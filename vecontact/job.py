@@ -303,6 +303,18 @@ def _petsc(value):
         if isinstance(v, bool):
             v = "true" if v else "false"
         out[k] = None if v is None else str(v)
+    # vecontact's own solver options (see vecontact/solver/snes.py): checked here, not mid-sweep
+    step = out.get("contact_step", "auto")
+    if step not in ("auto", "contact", "free"):
+        raise InputError("numerics.petsc", f"contact_step must be auto, contact or free, got {step!r}")
+    if "contact_step_area" in out:
+        try:
+            area = float(out["contact_step_area"])
+        except (TypeError, ValueError):
+            area = float("nan")
+        if not 0.0 <= area <= 1.0:
+            raise InputError("numerics.petsc",
+                             f"contact_step_area must be a number in [0, 1], got {out['contact_step_area']!r}")
     return out
 
 
