@@ -42,6 +42,7 @@ runs, but the compliance PC does not fit the scaled Jacobian; did not converge i
 """
 from __future__ import annotations
 
+import gc
 import time
 
 import numpy as np
@@ -547,6 +548,11 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
             st.step.release()
         if snes is not None:
             snes.destroy()
+        # the state, its Jacobian and PC contexts reference each other and hold N^2 arrays: break the
+        # cycles and collect now (the cyclic GC counts objects, not bytes: a 4096^2 sweep ran out of
+        # memory after 9 cases without this)
+        st.step = st.jac_ctx = st.free_pc = st.ksp = None
+        gc.collect()
         opts = PETSc.Options()
         for k in keys:
             try:
