@@ -91,7 +91,7 @@ class ContactSetStep:
         self.solves = 0
         self.last_iterations = 0
         self.restart = restart
-        self._A = self._B = None
+        self._A = None
         self.ksp = PETSc.KSP().create(comm=self.comm)
         self.ksp.setOptionsPrefix(prefix + "contact_")
         self._prefix = prefix + "contact_"
@@ -101,16 +101,7 @@ class ContactSetStep:
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
         """Mean over the (global) contact set of the C-vector ``a``."""
-        loc = np.array([float(np.sum(a))])
-        if self.comm.size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
-        return loc[0] / self.n_C
-
-    def _sum(self, a):
-        loc = np.array([float(np.sum(a))])
-        if self.comm.size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
-        return loc[0]
+        return self.fft.sum(a) / self.n_C
 
     def set_active(self, act):
         """New contact set ``act`` (bool, local rows; non-empty globally)."""
@@ -168,7 +159,7 @@ class ContactSetStep:
         w = self.w
         np.multiply(r, self.freef, out=w)
         w *= self.kappa                                   # s_F = kappa r_F, 0 on C
-        s0 = -self._sum(w) / self.n_C
+        s0 = -self.fft.sum(w) / self.n_C
         w.flat[idx] = s0                                  # s~
         fft.apply(w, self.op.c, self.out)                 # c s~
         b = self._b.getArray()

@@ -358,10 +358,7 @@ class _FreeSetPC(_PythonPC):
         act = st.act
         np.multiply(ra, st.freef, out=st.tmp2)           # P_F r
         st.fft.apply(st.tmp2, st.c_k, ya)                # kappa c P_F r
-        buf = np.array([np.sum(ya, where=act)])
-        if st.fft.size > 1:
-            st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
-        ya -= buf[0] / st.nact                           # rigid shift: <.>_C = 0
+        ya -= st.fft.sum(np.sum(ya, where=act)) / st.nact    # rigid shift: <.>_C = 0
         np.copyto(ya, ra, where=act)                     # identity on the contact set
 
 
