@@ -85,7 +85,6 @@ def postprocess(op, p_out, g_out):
     if fft.col_start == 0:
         Wq[0, 0] = 0.0
     w = fft.backward(Wq * n2)
-    fft.n_forward -= 0  # (counted)
     # dissipation: sum over full spectrum of q_x Im(M_q) |w_q|^2 / sigma0
     dens = (op.qx * op.M.imag) * (Wq.real ** 2 + Wq.imag ** 2)
     loc = float(np.sum(dens.sum(axis=0) * fft.half_weights()[0]))

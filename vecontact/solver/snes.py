@@ -549,7 +549,12 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
         # cycles and collect now (the cyclic GC counts objects, not bytes: a 4096^2 sweep ran out of
         # memory after 9 cases without this)
         st.step = st.jac_ctx = st.free_pc = st.ksp = None
+        ksp = pc = None   # (their wrappers, too, only go to petsc4py's garbage when released)
         gc.collect()
+        # petsc4py defers the destruction of collected objects on communicators of more than one rank
+        # (a collective call from a finaliser could deadlock); the deferred PCs keep their Python
+        # contexts, i.e. a whole solve's arrays, alive: 0.9 GB per case per rank at 4096^2 on 2 ranks
+        PETSc.garbage_cleanup(comm)
         opts = PETSc.Options()
         for k in keys:
             try:
