@@ -16,19 +16,19 @@ current contact set (``contact_step auto``, the default; ``contact_step contact|
   the free set exactly and runs an inner FGMRES (options prefix ``contact_``) on the restricted
   compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on C
   (A/A0 of the grid): orthogonalisation is cheap; 2 FFT pairs per inner iteration.
-* A/A0 > 0.15: on the whole grid.  KSP FGMRES (right preconditioning, restart 60 capped by memory)
-  with the Python PC "identity on C, Fourier-diagonal compliance on F plus a rigid shift"
+* A/A0 > 0.15: on the whole grid.  KSP GMRES (right preconditioning, restart RESTART_MAX = 120 capped
+  by memory: 43 at 4096^2 on 2 ranks) with the Python PC "identity on C, Fourier-diagonal compliance on F plus a rigid shift"
   B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C); 2 FFT pairs per iteration.
 Measured (paper surfaces, HN compound, 1 rank): the contact-set step needs 20-45 % fewer FFT pairs
 and 3-4x less time below A/A0 ~ 15 %; above ~ 30 % at v = 10 m/s its inexact steps (gap errors on C)
 make the active set wander and PDAS needs 40+ steps, where the grid step converges in 10-18.
-Linear tolerance (either way): loose (``lin_rtol``, default 0.1, at most LIN_MAXIT_CHANGING = 20
+Linear tolerance (either way): loose (``lin_rtol``, default 0.1, at most LIN_MAXIT_CHANGING = 40
 iterations) while the active set changes between Newton steps; tightened 10x (and the cap doubled)
 whenever a step makes no progress; "exact" once the set stops changing (the step is then the
 solution, PDAS converges in one more step), with the absolute tolerance tol/kappa (free-set residual,
 h_rms units; the 2-norm bounds the max-norm measure) or INNER_ATOL_FACTOR tol/kappa (gap error on C).
 ``-snes_ksp_ew``, ``-ksp_rtol``/``-ksp_atol`` or ``-contact_ksp_rtol``/``-contact_ksp_atol`` in
-petsc_options switch this rule off.  ``-ksp_type`` (default fgmres) applies to the grid steps.
+petsc_options switch this rule off.  ``-ksp_type`` (default gmres) applies to the grid steps.
 Convergence is decided by our own scale-free test (operator.py), installed with
 SNESSetConvergenceTest.
 
@@ -189,13 +189,13 @@ class _State:
                 self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=maxit)
 
     def linear_iterations(self, snes):
-        """Krylov iterations so far: outer FGMRES (free-set steps) + inner (contact-set steps; the
+        """Krylov iterations so far: outer GMRES (free-set steps) + inner (contact-set steps; the
         outer preonly KSP counts each of those solves as one iteration)."""
         return snes.getLinearSolveIterations() - self.step.solves + self.step.iterations
 
     def _switch(self, mode):
         """Solve the next Newton steps on the contact set (KSP preonly + ContactSetStep) or on the
-        grid (KSP FGMRES + _FreeSetPC)."""
+        grid (KSP GMRES + _FreeSetPC)."""
         pc = self.ksp.getPC()
         if mode == "contact":
             self.ksp.setType("preonly")
@@ -204,6 +204,9 @@ class _State:
             self.ksp.setType(self.free_ksp_type)
             if self.free_ksp_type in ("fgmres", "gmres"):
                 self.ksp.setGMRESRestart(self.restart)
+            if self.free_pc_side_right:
+                # the PC is a fixed linear map: right-preconditioned GMRES = FGMRES with half the memory
+                self.ksp.setPCSide(self._PETSc.PC.Side.RIGHT)
             pc.setPythonContext(self.free_pc)
         self.mode = mode
         self.modes.append((len(self.nchg_history) - 1, mode))
@@ -347,7 +350,7 @@ class _ViPrecond(_PythonPC):
 
 
 class _FreeSetPC(_PythonPC):
-    """Newton step on the whole grid (outer FGMRES), for large contact sets:
+    """Newton step on the whole grid (outer GMRES), for large contact sets:
     B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C), identity on C and the compliance on F with a rigid
     shift (the correction does not move the contact set on average)."""
 
@@ -421,17 +424,22 @@ def _is_number(s):
 
 _COUNTER = [0]
 AS_FACTOR = 1.0   # PDAS c = AS_FACTOR x kappa
-LIN_MAXIT_CHANGING = 20  # cap of the KSP iterations of Newton steps whose active set changed
+# cap of the KSP iterations of Newton steps whose active set changed; measured (1024^2, v = 10 m/s,
+# 28 %): 14 Newton steps at 20, 8 at 40 (active-set changes 4474, 2248, 1009, ... against 3705, 612, 221, ...)
+LIN_MAXIT_CHANGING = 40
 
 
-def default_restart(nloc, budget=None):
-    """FGMRES restart length: 60, capped so that its 2 (restart + 1) vectors fit in RESTART_MEMORY
-    bytes per rank (4096^2 on 2 ranks: 21)."""
+def default_restart(nloc, budget=None, vectors=1):
+    """GMRES restart length: RESTART_MAX, capped so that its ``vectors`` x (restart + 1) basis vectors
+    fit in RESTART_MEMORY bytes per rank (GMRES 1, FGMRES 2; 4096^2 on 2 ranks: 43 and 21)."""
     budget = RESTART_MEMORY if budget is None else budget
-    return int(max(10, min(60, budget // (16 * max(nloc, 1)) - 1)))
+    return int(max(10, min(RESTART_MAX, budget // (8 * vectors * max(nloc, 1)) - 1)))
 
 
 RESTART_MEMORY = 3e9
+# measured (1024^2, v = 10 m/s, 28 %, final Newton step): 380 / 168 / 145 / 101 iterations at restart
+# 20 / 45 / 60 / 100
+RESTART_MAX = 120
 LIN_RTOL_MIN = 1e-6
 FIRST_RTOL_FACTOR = 0.1
 CONTACT_STEP_AREA = 0.15   # auto: contact-set steps while A/A0 <= this, free-set steps above
@@ -450,13 +458,15 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
     comm = fft.comm
     nloc = int(np.prod(fft.local_real_shape))
     ntot = fft.N * fft.N
-    if restart is None:
-        restart = fft.comm.allreduce(default_restart(nloc), op=MPI.MIN)
-    _COUNTER[0] += 1
-    prefix = f"vecontact{_COUNTER[0]}_"
     user_items = dict(_parse_options(petsc_options))
     snes_type = user_items.get("snes_type", "newtonls")
     vi = snes_type.startswith("vi")
+    free_ksp_type = user_items.get("ksp_type", "fgmres" if vi else "gmres")
+    if restart is None:
+        restart = fft.comm.allreduce(default_restart(nloc, vectors=2 if free_ksp_type == "fgmres" else 1),
+                                     op=MPI.MIN)
+    _COUNTER[0] += 1
+    prefix = f"vecontact{_COUNTER[0]}_"
     own_lin = not any(k in user_items for k in ("snes_ksp_ew", "ksp_rtol", "ksp_atol",
                                                  "contact_ksp_rtol", "contact_ksp_atol"))
     st = _State(op, tol, lin_rtol if own_lin else None, vi=vi)
@@ -467,7 +477,8 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
     # residual is a gap error on C whose image under m is what the measure sees (INNER_ATOL_FACTOR)
     st.atol = tol / st.kappa
     st.restart = int(user_items.get("ksp_gmres_restart", restart))
-    st.free_ksp_type = user_items.get("ksp_type", "fgmres")
+    st.free_ksp_type = free_ksp_type
+    st.free_pc_side_right = free_ksp_type == "gmres" and "ksp_pc_side" not in user_items
     st.step_mode = user_items.get("contact_step", "auto")
     if st.step_mode not in ("auto", "contact", "free"):
         raise ValueError(f"petsc option contact_step: expected auto, contact or free, got {st.step_mode!r}")
