@@ -17,8 +17,8 @@ current contact set (``contact_step auto``, the default; ``contact_step contact|
   compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on C
   (A/A0 of the grid): orthogonalisation is cheap; 2 FFT pairs per inner iteration.
 * A/A0 > 0.15: on the whole grid.  KSP GMRES (right preconditioning, restart RESTART_MAX = 120 capped
-  by memory: 43 at 4096^2 on 2 ranks) with the Python PC "identity on C, Fourier-diagonal compliance on F plus a rigid shift"
-  B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C); 2 FFT pairs per iteration.
+  by memory: 43 at 4096^2 on 2 ranks) with the Python PC "identity on C, Fourier-diagonal compliance
+  on F plus a rigid shift" B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C); 2 FFT pairs per iteration.
 Measured (paper surfaces, HN compound, 1 rank): the contact-set step needs 20-45 % fewer FFT pairs
 and 3-4x less time below A/A0 ~ 15 %; above ~ 30 % at v = 10 m/s its inexact steps (gap errors on C)
 make the active set wander and PDAS needs 40+ steps, where the grid step converges in 10-18.
