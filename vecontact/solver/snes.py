@@ -557,15 +557,14 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
             st.step.release()
         if snes is not None:
             snes.destroy()
-        # the state, its Jacobian and PC contexts reference each other and hold N^2 arrays: break the
-        # cycles and collect now (the cyclic GC counts objects, not bytes: a 4096^2 sweep ran out of
-        # memory after 9 cases without this)
+        # Free the solve's N^2 arrays now.  The state and its PETSc contexts reference each other
+        # (partly through C, invisible to the cyclic GC): drop the references and collect.  petsc4py
+        # then only parks the collected objects of a multi-rank communicator (a collective destroy
+        # from a finaliser could deadlock), and a parked PC keeps its Python context alive:
+        # garbage_cleanup destroys them (without it, +0.9 GB per case and rank at 4096^2 on 2 ranks).
         st.step = st.jac_ctx = st.free_pc = st.ksp = None
-        ksp = pc = None   # (their wrappers, too, only go to petsc4py's garbage when released)
+        ksp = pc = None
         gc.collect()
-        # petsc4py defers the destruction of collected objects on communicators of more than one rank
-        # (a collective call from a finaliser could deadlock); the deferred PCs keep their Python
-        # contexts, i.e. a whole solve's arrays, alive: 0.9 GB per case per rank at 4096^2 on 2 ranks
         PETSc.garbage_cleanup(comm)
         opts = PETSc.Options()
         for k in keys:
