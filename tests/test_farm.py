@@ -3,6 +3,7 @@
 
 The jobs are small (N = 64 and 128) and use the real surface generator and solver.
 """
+import json
 import os
 import signal
 import subprocess
@@ -219,6 +220,16 @@ def test_serial_run(reference):
     assert out.count("] q1=") == 12 and "ETA" in out
     with h5py.File(d / "out.h5", "r") as f:
         assert f.attrs["complete"]
+        runs = [json.loads(r) for r in f["runs"][()]]
+        diag = [json.loads(r) for r in f["diagnostics"][()]]
+    # provenance: one run, every row written by it, its diagnostics agree with the row
+    assert len(runs) == 1 and runs[0]["nranks"] == 1 and "petsc_options" in runs[0]
+    assert (ref["run"] == 0).all() and len(diag) == len(ref)
+    for row, dg in zip(ref, diag):
+        assert dg["reason"] == "converged" and dg["method"] == "snes"
+        assert dg["levels"][-1]["N"] == row["N"] and dg["levels"][-1]["iterations"] == row["iterations"]
+        assert dg["history"][-1][1] == pytest.approx(row["residual"], rel=1e-12)
+        assert len(dg["active_set_changes"]) == row["iterations"]
 
 
 @pytest.mark.parametrize("rpc", [1, 2])
@@ -288,6 +299,11 @@ def test_kill_and_resume(tmp_path):
     assert p.stdout.count("] q1=") == len(ref) - len(before)
     final = cases_of(out)
     assert_same_results(ref, final, N_min=128)
+    # the rows before the kill keep the first run's index, the rest carry the second's
+    done_before = {tuple(r[k] for k in ("q1", "seed", "velocity", "pressure")) for r in before}
+    runs_of = [0 if tuple(r[k] for k in ("q1", "seed", "velocity", "pressure")) in done_before else 1
+               for r in final]
+    assert list(final["run"]) == runs_of
     assert len({tuple(r[k] for k in ("q1", "seed", "velocity", "pressure")) for r in final}) == len(final)
     # and again: nothing left to do
     p = vecontact(0, ["run", job], cwd=tmp_path)
@@ -358,6 +374,9 @@ def test_not_converged_recorded_and_fields(tmp_path):
     assert p.returncode == 0, p.stdout + p.stderr
     got = cases_of(tmp_path / "out.h5")
     assert (got["status"] == -1).all() and not got["converged"].any()
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        reasons = {json.loads(r)["reason"] for r in f["diagnostics"][()]}
+    assert reasons == {"diverged_max_it"}, reasons
     assert p.stdout.count("NOT CONVERGED") == len(got)
     assert np.isfinite(got["residual"]).all()
     with h5py.File(tmp_path / "out.h5", "r") as f:

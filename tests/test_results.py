@@ -119,3 +119,63 @@ def test_info_prints_stack():
     assert proc.returncode == 0, proc.stderr
     for word in ("python", "numpy", "mpi4py", "MPI library", "PETSc", "FFTW", "ranks: 1"):
         assert word in proc.stdout
+
+
+def test_runs_log_and_diagnostics_survive_restarts(tmp_path):
+    path = str(tmp_path / "r.h5")
+    w = ResultsFile.open(path, "", "hash-a", 2)
+    w.note_run(petsc_options={"ksp_type": "bcgs"})
+    w.add_row(_row(2.0, 1, 1.0, 5.0, 0.2), diagnostics={"reason": "converged", "its": np.int64(7)})
+    w.add_row(_row(1.0, 1, 1.0, 5.0, 0.1))                      # theory-only row: no diagnostics
+    w.commit()
+    w2 = ResultsFile.open(path, "", "hash-a", 1)               # restart: a second run
+    w2.add_row(_row(3.0, 1, 1.0, 5.0, 0.3), diagnostics={"reason": "diverged_max_it"})
+    w2.commit()
+    with h5py.File(path, "r") as f:
+        runs = [json.loads(s) for s in f["runs"][()]]
+        cases = f["cases"][()]
+        diag = [s.decode() for s in f["diagnostics"][()]]
+    assert [r["run"] for r in runs] == [0, 1] and [r["nranks"] for r in runs] == [2, 1]
+    assert runs[0]["petsc_options"] == {"ksp_type": "bcgs"} and "petsc_options" not in runs[1]
+    assert runs[0]["git_commit"] and runs[0]["versions"]["numpy"] == np.__version__
+    assert list(cases["q1"]) == [1.0, 2.0, 3.0] and list(cases["run"]) == [0, 0, 1]
+    # /diagnostics is aligned with the sorted /cases rows
+    assert diag[0] == "" and json.loads(diag[1]) == {"reason": "converged", "its": 7}
+    assert json.loads(diag[2])["reason"] == "diverged_max_it"
+
+
+def test_file_without_runs_log_resumes(tmp_path):
+    """A file written before the run column, /runs and /diagnostics existed stays readable and
+    resumable; its rows keep run = -1 (unknown)."""
+    path = str(tmp_path / "old.h5")
+    old_dtype = np.dtype([(n, CASE_DTYPE[n]) for n in CASE_DTYPE.names if n != "run"])
+    row = np.zeros(1, old_dtype)
+    row["q1"], row["seed"], row["velocity"], row["pressure"], row["area"] = 1.0, 1, 1.0, 5.0, 0.25
+    with h5py.File(path, "w") as f:
+        f.attrs["format"], f.attrs["physics_hash"] = "vecontact-results/1", "hash-a"
+        f["cases"] = row
+    w = ResultsFile.open(path, "", "hash-a", 1)
+    w.add_row(_row(2.0, 1, 1.0, 5.0, 0.2))
+    w.commit()
+    t = read_cases(path)
+    assert list(t["run"]) == [-1, 0] and t["area"][0] == 0.25
+    with h5py.File(path, "r") as f:
+        assert len(f["runs"]) == 1 and len(f["diagnostics"]) == 2
+
+
+def test_git_commit_flags_uncommitted_changes(tmp_path):
+    from vecontact.io.results import git_commit
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path,
+                       check=True, capture_output=True)
+    git("init", "-q")
+    (tmp_path / "a.py").write_text("x = 1\n")
+    git("add", "a.py")
+    git("commit", "-qm", "a")
+    clean = git_commit(str(tmp_path))
+    assert len(clean) == 40 and all(c in "0123456789abcdef" for c in clean)
+    (tmp_path / "untracked.txt").write_text("not code\n")       # untracked files do not count
+    assert git_commit(str(tmp_path)) == clean
+    (tmp_path / "a.py").write_text("x = 2\n")
+    assert git_commit(str(tmp_path)) == clean + "+dirty"

@@ -167,7 +167,7 @@ class Coordinator:
 
     ``request(leader, gsize, finished)`` is the whole protocol: a group leader (identified by its
     world rank) of a group of ``gsize`` ranks reports ``finished`` = (chain id, position, row,
-    fields link, reason) or None, and gets the group's next action: (WORK, chain, position),
+    fields link, solver diagnostics dict) or None, and gets the group's next action: (WORK, chain, position),
     (SPLIT, k, 0) or (STOP, 0, 0).
     """
 
@@ -261,11 +261,12 @@ class Coordinator:
         return (SPLIT, k, 0)
 
     # --------------------------------------------------------------------------------------------
-    def _record(self, cid, pos, row, link=None, reason=""):
+    def _record(self, cid, pos, row, link=None, diagnostics=None):
         ch = self.chains[cid]
         idx = ch.cases[pos]
+        reason = (diagnostics or {}).get("reason", "")
         if self.writer is not None:
-            self.writer.add_row(row)
+            self.writer.add_row(row, diagnostics=diagnostics or None)
             if link:
                 self.writer.link_fields(self.cases[idx].name, link)
         self.dirty = True
@@ -514,7 +515,8 @@ class _Farm:
             res, row, link = self.solve(group, self.chains[cid].cases[pos], warm)
             self.busy += time.perf_counter() - t
             prev = (cid, pos, res)
-            action = self.ask(group, (cid, pos, row, link, res.reason) if group.rank == 0 else None, buf)
+            action = self.ask(group, (cid, pos, row, link, solver_diagnostics(res)) if group.rank == 0 else None,
+                              buf)
 
     # --------------------------------------------------------------------------------------------
     def fft(self, group, N):
@@ -629,6 +631,19 @@ class _Farm:
         _abort(self.comm, text)
 
 
+def solver_diagnostics(res):
+    """What a row of /cases does not hold about a solve (stored in /diagnostics): the reason, the
+    per-level Newton counts, the fine grid's residual history and active-set changes, FFT pairs per
+    grid (fine-grid equivalents in /cases; here per level, unweighted)."""
+    d = res.diagnostics
+    return {"reason": res.reason, "method": res.method, "measures": res.measures,
+            "fft_pairs_by_level": {str(k): v for k, v in res.fft_pairs_by_level.items()},
+            "levels": d.get("levels", []), "history": d.get("history", []),
+            "active_set_changes": d.get("active_set_changes", []),
+            "linear_history": d.get("linear_history", []),
+            "kappa": d.get("kappa"), "ell": d.get("ell")}
+
+
 def grid_of(job, q1):
     s = job["surface"]
     if s["spectrum"] == "file":
@@ -683,6 +698,8 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
         done = writer.done()
         todo = np.array([c.key not in done for c in cases], dtype=bool)
     todo = comm.bcast(todo, root=0)
+    if rank == 0 and writer is not None:
+        writer.note_run(petsc_options=petsc_options, ranks_per_case=str(num["ranks_per_case"]))
     _first_commit(comm, writer)
     threaded = size == 1 or MPI.Query_thread() >= MPI.THREAD_MULTIPLE
     nwork = size if threaded else size - 1

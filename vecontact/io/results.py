@@ -3,9 +3,16 @@
 Layout (see README, "Results file"):
 
 - root attributes: ``format``, ``vecontact_version``, ``git_commit``, ``job_yaml``,
-  ``physics_hash``, ``created``, ``updated``, ``nranks``, ``complete``;
+  ``physics_hash``, ``created``, ``updated``, ``nranks``, ``complete`` (version, commit and ranks of
+  the latest run);
 - ``/cases``: compound dataset, one row per finished (q1, seed, velocity, pressure) case,
   sorted by those four columns; attribute ``units`` (JSON {column: unit}) and ``status_codes``;
+  column ``run`` indexes ``/runs``;
+- ``/runs``: one JSON object per invocation that wrote the file (a restarted sweep has several):
+  code version and git commit of the running code, start time, ranks, host, command line, PETSc
+  options, library versions;
+- ``/diagnostics``: one JSON string per row of ``/cases`` (same order; "" for theory-only rows): the
+  solver's reason, Newton residual history, active-set changes, Krylov counts and FFT pairs per level;
 - ``/theory``: Persson's theory (``q``, ``P_q``, dense ``curves``) per q1;
 - ``/spectrum``: C(q) per q1 (Fig. 1);
 - ``/fields/<case>``: optional per-case fields, as external links to files in
@@ -17,7 +24,9 @@ at any moment leaves either the previous or the new complete file.
 """
 import json
 import os
+import platform
 import subprocess
+import sys
 import time
 
 import h5py
@@ -52,6 +61,7 @@ COLUMNS = [
     ("seconds", "f8", "s", "wall time of the solve"),
     ("N", "i8", "", "grid points per side"),
     ("ranks", "i8", "", "ranks that solved the case"),
+    ("run", "i8", "", "index into /runs of the run that wrote the row (-1: written before /runs existed)"),
 ]
 CASE_DTYPE = np.dtype([(n, t) for n, t, _, _ in COLUMNS])
 KEY = ("q1", "seed", "velocity", "pressure")
@@ -75,14 +85,46 @@ def case_key(row):
     return (float(row["q1"]), int(row["seed"]), float(row["velocity"]), float(row["pressure"]))
 
 
-def git_commit():
-    here = os.path.dirname(os.path.abspath(__file__))
+def git_commit(where=None):
+    """HEAD of the checkout the package runs from (or of ``where``), with "+dirty" if tracked files
+    differ from it.  Read once per run (ResultsFile.open): HEAD may move while a long sweep runs."""
+    here = where or os.path.dirname(os.path.abspath(__file__))
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
-                             text=True, timeout=5)
-        return out.stdout.strip() if out.returncode == 0 else "unknown (not a git checkout)"
+        out = git("rev-parse", "HEAD")
+        if out.returncode != 0:
+            return "unknown (not a git checkout)"
+        status = git("status", "--porcelain", "--untracked-files=no")
+        dirty = status.returncode != 0 or bool(status.stdout.strip())
+        return out.stdout.strip() + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown (git not available)"
+
+
+def run_record(nranks, **extra):
+    """Provenance of this invocation (one entry of ``/runs``)."""
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "h5py": h5py.__version__}
+    for mod in ("mpi4py", "petsc4py", "pyfftw"):
+        m = sys.modules.get(mod)
+        if m is not None:
+            versions[mod] = getattr(m, "__version__", "?")
+    rec = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "vecontact_version": __version__,
+           "git_commit": git_commit(), "nranks": int(nranks), "host": platform.node(),
+           "argv": list(sys.argv), "versions": versions}
+    rec.update(extra)
+    return rec
+
+
+def _as_case_dtype(table):
+    """Rows of a file written with fewer columns (an older version), copied by name."""
+    out = np.empty(table.shape, dtype=CASE_DTYPE)
+    out[...] = empty_row()
+    for name in table.dtype.names:
+        if name in CASE_DTYPE.names:
+            out[name] = table[name]
+    return out
 
 
 def _fsync_dir(path):
@@ -148,6 +190,9 @@ class ResultsFile:
         self.groups = {}        # name -> {dataset name: array}, e.g. theory/spectrum
         self.group_attrs = {}
         self.field_links = {}   # case name -> relative file path
+        self.diagnostics = {}   # case key -> JSON string
+        self.runs = []          # JSON strings, one per run; this run's is appended by open()
+        self.run = None         # this run's index into self.runs
         self.complete = False
 
     # ---------------------------------------------------------------------------------------
@@ -156,7 +201,9 @@ class ResultsFile:
         self = cls(path, job_yaml, physics_hash, nranks)
         if os.path.exists(path):
             self._load_existing()
-        else:
+        self.run = len(self.runs)
+        self.runs.append(json.dumps(dict(run=self.run, **run_record(nranks))))
+        if not os.path.exists(path):
             folder = os.path.dirname(os.path.abspath(path))
             try:
                 os.makedirs(folder, exist_ok=True)
@@ -178,8 +225,13 @@ class ResultsFile:
                                                      "(changed job file?); use another output or remove it")
                 self.created = str(f.attrs.get("created", self.created))
                 if "cases" in f:
-                    for row in f["cases"][()].astype(CASE_DTYPE):
+                    table = _as_case_dtype(f["cases"][()])
+                    diags = _strings(f, "diagnostics", len(table))
+                    for row, diag in zip(table, diags):
                         self.rows[case_key(row)] = row
+                        if diag:
+                            self.diagnostics[case_key(row)] = diag
+                self.runs = _strings(f, "runs")
                 if "fields" in f:
                     for name in f["fields"]:
                         link = f["fields"].get(name, getlink=True)
@@ -200,8 +252,22 @@ class ResultsFile:
         self.groups[name] = datasets
         self.group_attrs[name] = attrs or {}
 
-    def add_row(self, row):
-        self.rows[case_key(row)] = np.array(row, dtype=CASE_DTYPE)[()]
+    def note_run(self, **info):
+        """Add items (e.g. the PETSc options) to this run's ``/runs`` entry."""
+        rec = json.loads(self.runs[self.run])
+        rec.update(info)
+        self.runs[self.run] = json.dumps(rec)
+
+    def add_row(self, row, diagnostics=None):
+        """Record a finished row (written by this run); ``diagnostics``: a JSON-serialisable dict."""
+        row = np.array(row, dtype=CASE_DTYPE)[()]
+        row["run"] = -1 if self.run is None else self.run
+        key = case_key(row)
+        self.rows[key] = row
+        if diagnostics is not None:
+            self.diagnostics[key] = json.dumps(diagnostics, default=_json_scalar)
+        else:
+            self.diagnostics.pop(key, None)
 
     def link_fields(self, case_name, rel):
         """Link a fields file already written by :func:`write_fields_file` (any rank) at next commit."""
@@ -219,7 +285,7 @@ class ResultsFile:
     def _fill(self, f):
         f.attrs["format"] = FORMAT
         f.attrs["vecontact_version"] = __version__
-        f.attrs["git_commit"] = git_commit()
+        f.attrs["git_commit"] = json.loads(self.runs[self.run])["git_commit"] if self.runs else git_commit()
         f.attrs["job_yaml"] = self.job_yaml
         f.attrs["physics_hash"] = self.physics_hash
         f.attrs["created"] = self.created
@@ -230,6 +296,11 @@ class ResultsFile:
         cases.attrs["units"] = json.dumps({n: u for n, _, u, _ in COLUMNS})
         cases.attrs["descriptions"] = json.dumps({n: d for n, _, _, d in COLUMNS})
         cases.attrs["status_codes"] = STATUS_CODES
+        text = h5py.string_dtype()
+        keys = sorted(self.rows)
+        f.create_dataset("diagnostics", data=np.array([self.diagnostics.get(k, "") for k in keys], dtype=object),
+                         dtype=text)
+        f.create_dataset("runs", data=np.array(self.runs, dtype=object), dtype=text)
         for name, datasets in self.groups.items():
             g = f.require_group(name)
             for k, v in self.group_attrs[name].items():
@@ -239,6 +310,20 @@ class ResultsFile:
             g = f.create_group("fields")
             for name, rel in sorted(self.field_links.items()):
                 g[name] = h5py.ExternalLink(rel, "/")
+
+
+def _json_scalar(obj):
+    """numpy scalars in diagnostics (np.int64 is not an int to json)."""
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"diagnostics: {type(obj).__name__} is not JSON serialisable")
+
+
+def _strings(f, name, n=None):
+    """A 1-D string dataset as a list of str (absent: n empty strings, or [])."""
+    if name not in f:
+        return [""] * (n or 0)
+    return [s.decode() if isinstance(s, bytes) else str(s) for s in f[name][()]]
 
 
 def _write_tree(group, tree):
