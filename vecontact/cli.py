@@ -1,4 +1,4 @@
-"""The ``vecontact`` command line: run, surface, plot, info, test.
+"""The ``vecontact`` command line: run, surface, plot, status, info, test.
 
 Bad input gives one line ``vecontact: error: KEY: PROBLEM`` on stderr and exit status 2,
 without a traceback and without writing anything.
@@ -31,6 +31,8 @@ def _parser():
     pl = sub.add_parser("plot", help="draw the paper's figures from a results file")
     pl.add_argument("results", help="results HDF5 file")
     pl.add_argument("-o", "--outdir", help="folder for the PNGs (default: next to the results)")
+    st = sub.add_parser("status", help="how far a sweep has got and what failed, from its results file")
+    st.add_argument("results", help="results HDF5 file")
     sub.add_parser("info", help="versions of the stack and the number of ranks")
     t = sub.add_parser("test", help="run the test suite (serial part; ./run test adds the MPI part)")
     t.add_argument("pytest_args", nargs=argparse.REMAINDER)
@@ -97,6 +99,9 @@ def _dispatch(argv):
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         return pytest.main([os.path.join(root, "tests"), "--ignore", os.path.join(root, "tests", "mpi")]
                            + args.pytest_args)
+    if args.command == "status":
+        from vecontact.status import status
+        return status(args.results)
     if args.command == "plot":
         from vecontact.plot import plot_results
         for path in plot_results(args.results, args.outdir):

@@ -1,0 +1,105 @@
+"""``vecontact status RESULTS.h5``: how far a sweep has got and what failed, from its results file.
+
+Reads the file only (no MPI, no PETSc): safe to run while the sweep writes it (each commit replaces
+the file atomically).  The job's full case list comes from ``/theory`` (the pressures of every
+(q1, v)) and the seeds of the stored job; a case is "to solve" until ``/cases`` has its row.
+"""
+import json
+import os
+
+import h5py
+import numpy as np
+import yaml
+
+from vecontact.errors import InputError
+
+KEY = ("q1", "seed", "velocity", "pressure")
+
+
+def read_status(path):
+    """dict with the job's cases, the finished rows, the runs log and the diagnostics of failures.
+
+    Raises InputError (key ``results``) for a missing or foreign file."""
+    if not os.path.isfile(path):
+        raise InputError("results", f"file not found: {path}")
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        raise InputError("results", f"{path} is not an HDF5 file") from None
+    with f:
+        if f.attrs.get("format") is None or "theory" not in f or "cases" not in f:
+            raise InputError("results", f"{path} is not a vecontact results file")
+        job = yaml.safe_load(f.attrs["job_yaml"])
+        expected = []
+        for name in f["theory"]:
+            g = f["theory"][name]
+            q1 = float(g.attrs["q1"])
+            for seed in job["surface"]["seeds"]:
+                for i, v in enumerate(g["velocity"][()]):
+                    expected += [(q1, int(seed), float(v), float(p)) for p in g["pressure"][i]]
+        cases = f["cases"][()]
+        diag = [d.decode() if isinstance(d, bytes) else str(d) for d in f["diagnostics"][()]] \
+            if "diagnostics" in f else [""] * len(cases)
+        runs = [json.loads(r) for r in f["runs"][()]] if "runs" in f else []
+        complete = bool(f.attrs.get("complete", False))
+    return dict(job=job, expected=sorted(set(expected)), cases=cases, diagnostics=diag, runs=runs,
+                complete=complete, numerics=bool(job.get("numerics", {}).get("enabled", False)))
+
+
+def format_status(path, st):
+    """The report as a list of lines."""
+    cases, expected = st["cases"], st["expected"]
+    done = {tuple(r[k].item() for k in KEY) for r in cases}
+    status = cases["status"]
+    lines = []
+    if not st["numerics"]:
+        lines.append(f"{path}: theory only ({len(cases)} of {len(expected)} cases written"
+                     f"{', complete' if st['complete'] else ''})")
+        return lines
+    nconv, nfail = int((status == 1).sum()), int((status == -1).sum())
+    left = [c for c in expected if c not in done]
+    lines.append(f"{path}: {len(expected)} cases: {nconv} converged, {nfail} NOT converged, "
+                 f"{len(left)} to solve{' (complete)' if st['complete'] else ''}")
+    lines.append(f"{'q1 (1/m)':>10} {'seed':>4} {'v (m/s)':>8} {'N':>5}  {'conv/total':>10} {'failed':>6}  "
+                 f"{'A/A0 converged':>17}  {'max s':>7}  {'core-h':>6}")
+    groups = sorted({(c[0], c[1], c[2]) for c in expected})
+    for q1, seed, v in groups:
+        total = sum(1 for c in expected if c[:3] == (q1, seed, v))
+        sel = (cases["q1"] == q1) & (cases["seed"] == seed) & (cases["velocity"] == v)
+        rows = cases[sel]
+        ok = rows[rows["status"] == 1]
+        area = f"{ok['area'].min():.4f}-{ok['area'].max():.4f}" if len(ok) else "-"
+        N = int(rows["N"].max()) if len(rows) else _grid(st["job"], q1)
+        secs = rows["seconds"][np.isfinite(rows["seconds"])]
+        core_h = float(np.sum(secs * np.maximum(rows["ranks"][np.isfinite(rows["seconds"])], 1))) / 3600
+        lines.append(f"{q1:10.4g} {seed:4d} {v:8.4g} {N:5d}  {len(ok):>4d}/{total:<5d} "
+                     f"{int((rows['status'] == -1).sum()):6d}  {area:>17}  "
+                     f"{(secs.max() if len(secs) else 0):7.0f}  {core_h:6.2f}")
+    failed = [(r, d) for r, d in zip(cases, st["diagnostics"]) if r["status"] == -1]
+    if failed:
+        lines.append("NOT converged (their numerical columns are not results):")
+        for r, d in failed:
+            reason = json.loads(d).get("reason", "?") if d else "?"
+            lines.append(f"  q1={r['q1']:.4g} seed={r['seed']} v={r['velocity']:.4g} p={r['pressure']:.4g}: "
+                         f"residual {r['residual']:.2e}, {reason}, {r['iterations']} Newton steps")
+    if st["runs"]:
+        lines.append("runs:")
+        for run in st["runs"]:
+            n = int((cases["run"] == run["run"]).sum()) if "run" in cases.dtype.names else 0
+            lines.append(f"  {run['run']}: {run['started']}  {run['git_commit'][:12]}"
+                         f"{'+dirty' if run['git_commit'].endswith('+dirty') else ''}  "
+                         f"{run['nranks']} ranks on {run['host']}  {n} rows")
+    if "run" in cases.dtype.names and (cases["run"] == -1).any():
+        lines.append(f"  ({int((cases['run'] == -1).sum())} rows written before the runs log existed)")
+    return lines
+
+
+def _grid(job, q1):
+    grid = job.get("surface", {}).get("grid") or {}
+    return int(grid.get(repr(float(q1)), 0))
+
+
+def status(path):
+    """Print the report; exit status 0 (the sweep may be unfinished: that is not an error)."""
+    print("\n".join(format_status(path, read_status(path))))
+    return 0
