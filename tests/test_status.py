@@ -45,6 +45,7 @@ def test_status_counts_progress_and_names_failures(tmp_path):
 
 
 def test_status_cli_and_bad_file(tmp_path):
+    """status (and plot) refuse a foreign or missing file in one line, exit 2, nothing written."""
     path = tmp_path / "r.h5"
     _sweep_file(path)
     p = subprocess.run([sys.executable, "-m", "vecontact", "status", str(path)], capture_output=True, text=True,
@@ -53,8 +54,8 @@ def test_status_cli_and_bad_file(tmp_path):
     foreign = tmp_path / "x.h5"
     with h5py.File(foreign, "w") as f:
         f["x"] = 1
-    for bad in (foreign, tmp_path / "missing.h5"):
-        p = subprocess.run([sys.executable, "-m", "vecontact", "status", str(bad)], capture_output=True,
+    for cmd, bad in (("status", foreign), ("status", tmp_path / "missing.h5"), ("plot", foreign)):
+        p = subprocess.run([sys.executable, "-m", "vecontact", cmd, str(bad)], capture_output=True,
                            text=True, timeout=120)
         assert p.returncode == 2 and p.stdout == ""
         assert len(p.stderr.strip().splitlines()) == 1 and p.stderr.startswith("vecontact: error: results:")

@@ -8,22 +8,13 @@ Theory is drawn as lines, converged numerical cases as markers; unconverged case
 """
 import os
 
-import h5py
 import numpy as np
 
-from vecontact.errors import InputError
+from vecontact.io.results import open_for_reading
 
 
 def _load(path):
-    if not os.path.isfile(path):
-        raise InputError("results", f"file not found: {path}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError:
-        raise InputError("results", f"{path} is not an HDF5 file") from None
-    with f:
-        if "theory" not in f or "cases" not in f:
-            raise InputError("results", f"{path} is not a vecontact results file (no /theory or /cases)")
+    with open_for_reading(path) as f:
         import yaml
         job = yaml.safe_load(f.attrs["job_yaml"])
         theory = []

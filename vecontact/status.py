@@ -5,13 +5,11 @@ the file atomically).  The job's full case list comes from ``/theory`` (the pres
 (q1, v)) and the seeds of the stored job; a case is "to solve" until ``/cases`` has its row.
 """
 import json
-import os
 
-import h5py
 import numpy as np
 import yaml
 
-from vecontact.errors import InputError
+from vecontact.io.results import open_for_reading
 
 KEY = ("q1", "seed", "velocity", "pressure")
 
@@ -20,15 +18,7 @@ def read_status(path):
     """dict with the job's cases, the finished rows, the runs log and the diagnostics of failures.
 
     Raises InputError (key ``results``) for a missing or foreign file."""
-    if not os.path.isfile(path):
-        raise InputError("results", f"file not found: {path}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError:
-        raise InputError("results", f"{path} is not an HDF5 file") from None
-    with f:
-        if f.attrs.get("format") is None or "theory" not in f or "cases" not in f:
-            raise InputError("results", f"{path} is not a vecontact results file")
+    with open_for_reading(path) as f:
         job = yaml.safe_load(f.attrs["job_yaml"])
         expected = []
         for name in f["theory"]:

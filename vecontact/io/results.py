@@ -337,6 +337,22 @@ def _write_tree(group, tree):
             group.create_dataset(k, data=np.asarray(v))
 
 
+def open_for_reading(path):
+    """The results file ``path`` open read-only; InputError (key ``results``) if it is missing, not
+    HDF5 or not a vecontact results file."""
+    from vecontact.errors import InputError
+    if not os.path.isfile(path):
+        raise InputError("results", f"file not found: {path}")
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        raise InputError("results", f"{path} is not an HDF5 file") from None
+    if f.attrs.get("format") != FORMAT or "theory" not in f or "cases" not in f:
+        f.close()
+        raise InputError("results", f"{path} is not a vecontact results file (no format, /theory or /cases)")
+    return f
+
+
 def read_cases(path):
     """The /cases table of a results file as a numpy structured array."""
     with h5py.File(path, "r") as f:
