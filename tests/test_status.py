@@ -59,3 +59,4 @@ def test_status_cli_and_bad_file(tmp_path):
                            text=True, timeout=120)
         assert p.returncode == 2 and p.stdout == ""
         assert len(p.stderr.strip().splitlines()) == 1 and p.stderr.startswith("vecontact: error: results:")
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["r.h5", "x.h5"]     # nothing written
