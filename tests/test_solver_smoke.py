@@ -122,3 +122,31 @@ def test_bad_step_mode_is_refused():
     h = _random_surface(fft, 1e-4, q1fac=4)
     with pytest.raises(ValueError, match="contact_step"):
         solve_contact(fft, 1e-4, h, Elastic(3e6), 0.0, 2e3, petsc_options={"contact_step": "sideways"})
+
+
+def test_krylov_kernel_options_global_and_overridable():
+    """PETSc's own VecMDot/VecMAXPY kernels by default (snes.GLOBAL_DEFAULTS); a user's value from
+    petsc_options is set globally (these options have no prefix) and gives the same solution."""
+    from vecontact.solver.snes import GLOBAL_DEFAULTS, petsc
+    PETSc = petsc()
+    opts = PETSc.Options()
+    saved = {k: opts.getString(k) if opts.hasName(k) else None for k in GLOBAL_DEFAULTS}
+    try:
+        for k in GLOBAL_DEFAULTS:
+            opts.delValue(k)
+        N, L = 64, 1e-4
+        fft = _fft(N)
+        h = _random_surface(fft, L)
+        mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+        a = solve_contact(fft, L, h, mod, 1.0, 2e5, store=(), coarse=False)
+        assert all(opts.getString(k) == "0" for k in GLOBAL_DEFAULTS)
+        b = solve_contact(fft, L, h, mod, 1.0, 2e5, store=(), coarse=False,
+                          petsc_options={"vec_mdot_use_gemv": "1", "vec_maxpy_use_gemv": "true"})
+        assert opts.getString("vec_mdot_use_gemv") == "1" and opts.getString("vec_maxpy_use_gemv") == "true"
+        assert a.converged and b.converged and abs(a.area - b.area) <= 1.0 / N ** 2
+        assert abs(a.mu - b.mu) <= 1e-6 * abs(a.mu)
+    finally:
+        for k, v in saved.items():
+            opts.delValue(k)
+            if v is not None:
+                opts[k] = v
