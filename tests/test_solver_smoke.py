@@ -150,3 +150,26 @@ def test_krylov_kernel_options_global_and_overridable():
             opts.delValue(k)
             if v is not None:
                 opts[k] = v
+
+
+def test_auto_step_mode_follows_contact_area():
+    """contact_step auto: contact-set Newton steps while A/A0 <= contact_step_area (CONTACT_STEP_AREA
+    by default), grid steps above; both give the same solution."""
+    from vecontact.solver.snes import CONTACT_STEP_AREA
+    N, L = 64, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+
+    def run(sigma0, **opts):
+        r = solve_contact(fft, L, h, mod, 1.0, sigma0, store=(), coarse=False, petsc_options=opts or None)
+        assert r.converged, r.summary()
+        return r, {m for _, m in r.diagnostics["step_modes"]}
+
+    low, modes_low = run(300.0)
+    high, modes_high = run(1e4)
+    assert low.area < CONTACT_STEP_AREA < high.area, (low.area, high.area)
+    assert modes_low == {"contact"} and modes_high == {"free"}
+    forced, modes_forced = run(1e4, contact_step_area=1.0)
+    assert modes_forced == {"contact"}
+    assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu

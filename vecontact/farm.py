@@ -641,6 +641,7 @@ def solver_diagnostics(res):
             "levels": d.get("levels", []), "history": d.get("history", []),
             "active_set_changes": d.get("active_set_changes", []),
             "linear_history": d.get("linear_history", []),
+            "step_modes": d.get("step_modes", []),
             "kappa": d.get("kappa"), "ell": d.get("ell")}
 
 

@@ -173,7 +173,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         diagnostics=dict(levels=levels_info, ell=op.ell, hrms=op.hrms, k=op.k, kappa=op.kappa,
                          history=[(int(a), float(b)) for a, b, *_ in info.get("history", [])],
                          active_set_changes=info.get("nchg", []),
-                         linear_history=info.get("lin_history", [])),
+                         linear_history=info.get("lin_history", []),
+                         step_modes=info.get("modes", [])),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,

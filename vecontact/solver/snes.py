@@ -11,17 +11,19 @@ current iterate, free set F its complement.  Generalised Jacobian (Python Mat, o
     J x = P_C x + P_F m x / kappa.
 The Newton step J x = r is solved in one of two ways, chosen before every step from the size of the
 current contact set (``contact_step auto``, the default; ``contact_step contact|free`` forces one;
-``contact_step_area`` sets the switch, CONTACT_STEP_AREA = 0.15):
-* A/A0 <= 0.15: on the contact set (contactset.py).  KSP ``preonly`` with a Python PC that eliminates
+``contact_step_area`` sets the switch, CONTACT_STEP_AREA = 0.3):
+* A/A0 <= 0.3: on the contact set (contactset.py).  KSP ``preonly`` with a Python PC that eliminates
   the free set exactly and runs an inner FGMRES (options prefix ``contact_``) on the restricted
   compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on C
   (A/A0 of the grid): orthogonalisation is cheap; 2 FFT pairs per inner iteration.
-* A/A0 > 0.15: on the whole grid.  KSP GMRES (right preconditioning, restart RESTART_MAX = 120 capped
+* A/A0 > 0.3: on the whole grid.  KSP GMRES (right preconditioning, restart RESTART_MAX = 120 capped
   by memory: 43 at 4096^2 on 2 ranks) with the Python PC "identity on C, Fourier-diagonal compliance
   on F plus a rigid shift" B r = P_C r + kappa P_F (c P_F r - <c P_F r>_C); 2 FFT pairs per iteration.
 Measured (paper surfaces, HN compound, 1 rank): the contact-set step needs 20-45 % fewer FFT pairs
-and 3-4x less time below A/A0 ~ 15 %; above ~ 30 % at v = 10 m/s its inexact steps (gap errors on C)
-make the active set wander and PDAS needs 40+ steps, where the grid step converges in 10-18.
+and 3-4x less time below A/A0 ~ 15 %.  From 15 to 30 % it needs about the same pairs in 1.3-2.3x less
+time (no orthogonalisation over N^2 vectors; 1024^2 and 2048^2, v = 0.01-10 m/s).  Above, at
+v = 10 m/s, its inexact steps (gap errors on C) make the active set wander: 2048^2, 43 %: 18 Newton
+steps, 6384 pairs, 997 s against 14, 1756, 401 s on the grid (at 0.1 m/s, 64 % it still wins).
 Linear tolerance (either way): loose (``lin_rtol``, default 0.1, at most LIN_MAXIT_CHANGING = 40
 iterations) while the active set changes between Newton steps; tightened 10x (and the cap doubled)
 whenever a step makes no progress; "exact" once the set stops changing (the step is then the
@@ -460,7 +462,10 @@ RESTART_MEMORY = 3e9
 RESTART_MAX = 120
 LIN_RTOL_MIN = 1e-6
 FIRST_RTOL_FACTOR = 0.1
-CONTACT_STEP_AREA = 0.15   # auto: contact-set steps while A/A0 <= this, free-set steps above
+# auto: contact-set steps while A/A0 <= this, grid steps above.  Measured 0.15 -> 0.3 (seconds, 1 rank,
+# contact-set / grid steps): 2048^2, v = 10 m/s, 28 %: 243 / 374; 1024^2, 19-28 %: v = 1: 11.5 / 26.2,
+# 18.6 / 26.6; v = 10: 17.8 / 33.0, 22.8 / 42.9.  2048^2, v = 10, 43 %: 997 / 401 (see the docstring)
+CONTACT_STEP_AREA = 0.3
 INNER_ATOL_FACTOR = 5.0   # measured: 0.5 costs ~5 % more pairs, 20 one more Newton step
 
 
