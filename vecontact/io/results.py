@@ -33,7 +33,7 @@ import h5py
 import numpy as np
 
 from vecontact import __version__
-from vecontact.errors import ResultsFileError
+from vecontact.errors import InputError, ResultsFileError
 
 FORMAT = "vecontact-results/1"
 
@@ -340,7 +340,6 @@ def _write_tree(group, tree):
 def open_for_reading(path):
     """The results file ``path`` open read-only; InputError (key ``results``) if it is missing, not
     HDF5 or not a vecontact results file."""
-    from vecontact.errors import InputError
     if not os.path.isfile(path):
         raise InputError("results", f"file not found: {path}")
     try:
