@@ -153,9 +153,12 @@ def test_krylov_kernel_options_global_and_overridable():
 
 
 def test_auto_step_mode_follows_contact_area():
-    """contact_step auto: contact-set Newton steps while A/A0 <= contact_step_area (CONTACT_STEP_AREA
-    by default), grid steps above; both give the same solution."""
-    from vecontact.solver.snes import CONTACT_STEP_AREA
+    """contact_step auto: contact-set Newton steps while A/A0 <= contact_step_area (default_step_area(N):
+    0.3 up to 2048^2, 0.15 above), grid steps above; both give the same solution."""
+    from vecontact.solver.snes import default_step_area
+    assert default_step_area(512) == default_step_area(2048) == 0.3
+    assert default_step_area(4096) == default_step_area(8192) == 0.15
+    CONTACT_STEP_AREA = default_step_area(64)
     N, L = 64, 1e-4
     fft = _fft(N)
     h = _random_surface(fft, L)

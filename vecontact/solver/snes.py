@@ -11,7 +11,7 @@ current iterate, free set F its complement.  Generalised Jacobian (Python Mat, o
     J x = P_C x + P_F m x / kappa.
 The Newton step J x = r is solved in one of two ways, chosen before every step from the size of the
 current contact set (``contact_step auto``, the default; ``contact_step contact|free`` forces one;
-``contact_step_area`` sets the switch, CONTACT_STEP_AREA = 0.3):
+``contact_step_area`` sets the switch, CONTACT_STEP_AREA = 0.3 up to 2048^2, 0.15 above):
 * A/A0 <= 0.3: on the contact set (contactset.py).  KSP ``preonly`` with a Python PC that eliminates
   the free set exactly and runs an inner FGMRES (options prefix ``contact_``) on the restricted
   compliance c_CC, preconditioned by the restricted stiffness m_CC.  Its Krylov vectors live on C
@@ -465,7 +465,16 @@ FIRST_RTOL_FACTOR = 0.1
 # auto: contact-set steps while A/A0 <= this, grid steps above.  Measured 0.15 -> 0.3 (seconds, 1 rank,
 # contact-set / grid steps): 2048^2, v = 10 m/s, 28 %: 243 / 374; 1024^2, 19-28 %: v = 1: 11.5 / 26.2,
 # 18.6 / 26.6; v = 10: 17.8 / 33.0, 22.8 / 42.9.  2048^2, v = 10, 43 %: 997 / 401 (see the docstring)
+# Not above 2048^2: at 4096^2 on 2 ranks, v = 1 m/s, 28 % a contact-set solve ran > 35 min where the
+# grid-step solve of 0.1 m/s, 28 % took 13 min (not side by side; paper run, session 4).
 CONTACT_STEP_AREA = 0.3
+CONTACT_STEP_AREA_LARGE = 0.15   # N > CONTACT_STEP_LARGE_N
+CONTACT_STEP_LARGE_N = 2048
+
+
+def default_step_area(N):
+    """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set (N x N grid)."""
+    return CONTACT_STEP_AREA if N <= CONTACT_STEP_LARGE_N else CONTACT_STEP_AREA_LARGE
 INNER_ATOL_FACTOR = 5.0   # measured: 0.5 costs ~5 % more pairs, 20 one more Newton step
 
 
@@ -505,7 +514,7 @@ def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, re
     st.step_mode = user_items.get("contact_step", "auto")
     if st.step_mode not in ("auto", "contact", "free"):
         raise ValueError(f"petsc option contact_step: expected auto, contact or free, got {st.step_mode!r}")
-    st.step_area = float(user_items.get("contact_step_area", CONTACT_STEP_AREA))
+    st.step_area = float(user_items.get("contact_step_area", default_step_area(fft.N)))
     st.modes = []
     defaults = {
         "snes_type": "newtonls",
