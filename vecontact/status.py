@@ -9,9 +9,7 @@ import json
 import numpy as np
 import yaml
 
-from vecontact.io.results import open_for_reading
-
-KEY = ("q1", "seed", "velocity", "pressure")
+from vecontact.io.results import case_key, open_for_reading, read_strings
 
 
 def read_status(path):
@@ -28,9 +26,8 @@ def read_status(path):
                 for i, v in enumerate(g["velocity"][()]):
                     expected += [(q1, int(seed), float(v), float(p)) for p in g["pressure"][i]]
         cases = f["cases"][()]
-        diag = [d.decode() if isinstance(d, bytes) else str(d) for d in f["diagnostics"][()]] \
-            if "diagnostics" in f else [""] * len(cases)
-        runs = [json.loads(r) for r in f["runs"][()]] if "runs" in f else []
+        diag = read_strings(f, "diagnostics", len(cases))
+        runs = [json.loads(r) for r in read_strings(f, "runs")]
         complete = bool(f.attrs.get("complete", False))
     return dict(job=job, expected=sorted(set(expected)), cases=cases, diagnostics=diag, runs=runs,
                 complete=complete, numerics=bool(job.get("numerics", {}).get("enabled", False)))
@@ -39,7 +36,7 @@ def read_status(path):
 def format_status(path, st):
     """The report as a list of lines."""
     cases, expected = st["cases"], st["expected"]
-    done = {tuple(r[k].item() for k in KEY) for r in cases}
+    done = {case_key(r) for r in cases}
     status = cases["status"]
     lines = []
     if not st["numerics"]:

@@ -191,7 +191,7 @@ class ResultsFile:
         self.group_attrs = {}
         self.field_links = {}   # case name -> relative file path
         self.diagnostics = {}   # case key -> JSON string
-        self.runs = []          # JSON strings, one per run; this run's is appended by open()
+        self.runs = []          # one dict per run (JSON in the file); this run's is appended by open()
         self.run = None         # this run's index into self.runs
         self.complete = False
 
@@ -202,7 +202,7 @@ class ResultsFile:
         if os.path.exists(path):
             self._load_existing()
         self.run = len(self.runs)
-        self.runs.append(json.dumps(dict(run=self.run, **run_record(nranks))))
+        self.runs.append(dict(run=self.run, **run_record(nranks)))
         if not os.path.exists(path):
             folder = os.path.dirname(os.path.abspath(path))
             try:
@@ -226,12 +226,12 @@ class ResultsFile:
                 self.created = str(f.attrs.get("created", self.created))
                 if "cases" in f:
                     table = _as_case_dtype(f["cases"][()])
-                    diags = _strings(f, "diagnostics", len(table))
+                    diags = read_strings(f, "diagnostics", len(table))
                     for row, diag in zip(table, diags):
                         self.rows[case_key(row)] = row
                         if diag:
                             self.diagnostics[case_key(row)] = diag
-                self.runs = _strings(f, "runs")
+                self.runs = [json.loads(r) for r in read_strings(f, "runs")]
                 if "fields" in f:
                     for name in f["fields"]:
                         link = f["fields"].get(name, getlink=True)
@@ -254,9 +254,7 @@ class ResultsFile:
 
     def note_run(self, **info):
         """Add items (e.g. the PETSc options) to this run's ``/runs`` entry."""
-        rec = json.loads(self.runs[self.run])
-        rec.update(info)
-        self.runs[self.run] = json.dumps(rec)
+        self.runs[self.run].update(info)
 
     def add_row(self, row, diagnostics=None):
         """Record a finished row (written by this run); ``diagnostics``: a JSON-serialisable dict."""
@@ -285,7 +283,7 @@ class ResultsFile:
     def _fill(self, f):
         f.attrs["format"] = FORMAT
         f.attrs["vecontact_version"] = __version__
-        f.attrs["git_commit"] = json.loads(self.runs[self.run])["git_commit"] if self.runs else git_commit()
+        f.attrs["git_commit"] = self.runs[self.run]["git_commit"] if self.runs else git_commit()
         f.attrs["job_yaml"] = self.job_yaml
         f.attrs["physics_hash"] = self.physics_hash
         f.attrs["created"] = self.created
@@ -300,7 +298,7 @@ class ResultsFile:
         keys = sorted(self.rows)
         f.create_dataset("diagnostics", data=np.array([self.diagnostics.get(k, "") for k in keys], dtype=object),
                          dtype=text)
-        f.create_dataset("runs", data=np.array(self.runs, dtype=object), dtype=text)
+        f.create_dataset("runs", data=np.array([json.dumps(r) for r in self.runs], dtype=object), dtype=text)
         for name, datasets in self.groups.items():
             g = f.require_group(name)
             for k, v in self.group_attrs[name].items():
@@ -319,7 +317,7 @@ def _json_scalar(obj):
     raise TypeError(f"diagnostics: {type(obj).__name__} is not JSON serialisable")
 
 
-def _strings(f, name, n=None):
+def read_strings(f, name, n=None):
     """A 1-D string dataset as a list of str (absent: n empty strings, or [])."""
     if name not in f:
         return [""] * (n or 0)

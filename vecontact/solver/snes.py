@@ -470,12 +470,12 @@ FIRST_RTOL_FACTOR = 0.1
 CONTACT_STEP_AREA = 0.3
 CONTACT_STEP_AREA_LARGE = 0.15   # N > CONTACT_STEP_LARGE_N
 CONTACT_STEP_LARGE_N = 2048
+INNER_ATOL_FACTOR = 5.0   # measured: 0.5 costs ~5 % more pairs, 20 one more Newton step
 
 
 def default_step_area(N):
     """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set (N x N grid)."""
     return CONTACT_STEP_AREA if N <= CONTACT_STEP_LARGE_N else CONTACT_STEP_AREA_LARGE
-INNER_ATOL_FACTOR = 5.0   # measured: 0.5 costs ~5 % more pairs, 20 one more Newton step
 
 
 def ncp_solve(op, g0, tol=1e-8, petsc_options=None, max_it=100, lin_rtol=0.1, restart=None,
