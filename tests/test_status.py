@@ -60,3 +60,17 @@ def test_status_cli_and_bad_file(tmp_path):
         assert p.returncode == 2 and p.stdout == ""
         assert len(p.stderr.strip().splitlines()) == 1 and p.stderr.startswith("vecontact: error: results:")
     assert sorted(q.name for q in tmp_path.iterdir()) == ["r.h5", "x.h5"]     # nothing written
+
+
+def test_status_into_a_closed_pipe_is_quiet(tmp_path):
+    """``vecontact status F | head -1``: the reader is gone before the table is written; exit 141
+    (128 + SIGPIPE, as a shell tool), no traceback, buffered or not."""
+    path = tmp_path / "r.h5"
+    _sweep_file(path)
+    code = ("import os, sys; r, w = os.pipe(); os.close(r); os.dup2(w, 1); "
+            "from vecontact.cli import main; sys.exit(main(['status', sys.argv[1]]))")
+    for unbuffered in ("", "1"):
+        env = dict(__import__("os").environ, PYTHONUNBUFFERED=unbuffered)
+        p = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True,
+                           timeout=120, env=env)
+        assert p.returncode == 141 and p.stderr == "", (unbuffered, p.returncode, p.stderr)

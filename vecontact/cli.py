@@ -130,13 +130,19 @@ def _dispatch(argv):
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     try:
-        return _dispatch(argv)
+        rc = _dispatch(argv)
+        sys.stdout.flush()
+        return rc
     except InputError as exc:
         if _rank() == 0:
             print(f"vecontact: error: {exc}", file=sys.stderr, flush=True)
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # reader gone (``vecontact status F | head``): no traceback; stdout must not flush at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 def _rank():
