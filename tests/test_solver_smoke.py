@@ -176,3 +176,21 @@ def test_auto_step_mode_follows_contact_area():
     forced, modes_forced = run(1e4, contact_step_area=1.0)
     assert modes_forced == {"contact"}
     assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu
+
+
+@pytest.mark.parametrize("changes, residuals, tighter", [
+    ([-1, 69409, 29531], [1e-1, 1e-2, 1e-3], True),     # 4096^2, 1 m/s, 28 %: shrinks only 2.4x: wanders
+    ([-1, 3035, 340], [1e-1, 1e-2, 1e-3], False),      # shrinks 9x: keep the loose steps
+    ([-1, 3035, 340, 3], [1, 0.1, 0.01, 1e-3], False),
+    ([-1, 100, 120], [1e-1, 1e-2, 1e-3], True),        # grew
+    ([-1, 100, 10], [1e-1, 1e-2, 2e-2], True),         # the residual did not fall
+    ([-1, 100], [1e-1, 1e-2], False),                  # one step says nothing
+    ([-1, 100, 0], [1e-1, 1e-2, 1e-3], False),
+    ([-1, 0, 0], [1e-1, 1e-2, 1e-3], False),
+])
+def test_tighten_steps(changes, residuals, tighter):
+    """When the inexact Newton steps are solved tighter: set changes that grow or shrink by less than
+    1 / WANDER_RATIO (= 3.3x) per step, or a residual that does not fall."""
+    from vecontact.solver.snes import WANDER_RATIO, tighten_steps
+    assert WANDER_RATIO == 0.3
+    assert tighten_steps(changes, residuals) is tighter
