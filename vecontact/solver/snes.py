@@ -462,7 +462,8 @@ FIRST_RTOL_FACTOR = 0.1
 # contact-set / grid steps): 2048^2, v = 10 m/s, 28 %: 243 / 374; 1024^2, 19-28 %: v = 1: 11.5 / 26.2,
 # 18.6 / 26.6; v = 10: 17.8 / 33.0, 22.8 / 42.9.  2048^2, v = 10, 43 %: 997 / 401 (see the docstring)
 # Not above 2048^2: at 4096^2 on 2 ranks, v = 1 m/s, 28 % a contact-set solve ran > 35 min where the
-# grid-step solve of 0.1 m/s, 28 % took 13 min (not side by side; paper run, session 4).
+# grid-step solve of 0.1 m/s, 28 % took 13 min (not side by side; paper run, session 4).  Side by side
+# with tighten_steps (2 ranks, idle): 1 m/s, 28 %: grid steps 954 s; contact-set steps stopped at 1047 s.
 CONTACT_STEP_AREA = 0.3
 CONTACT_STEP_AREA_LARGE = 0.15   # N > CONTACT_STEP_LARGE_N
 CONTACT_STEP_LARGE_N = 2048
