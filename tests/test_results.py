@@ -179,3 +179,19 @@ def test_git_commit_flags_uncommitted_changes(tmp_path):
     assert git_commit(str(tmp_path)) == clean
     (tmp_path / "a.py").write_text("x = 2\n")
     assert git_commit(str(tmp_path)) == clean + "+dirty"
+
+
+def test_unconverged_cases_are_never_drawn():
+    """plot draws /cases rows with status 1 only; a failed row (-1) keeps its finite numbers in the
+    file for inspection but is not a result, and theory-only rows (0) have none."""
+    from vecontact.plot import drawn_cases
+    rows = []
+    for status, area in ((1, 0.25), (-1, 0.5), (0, np.nan), (1, 0.125)):
+        r = _row(1e7, 1, 1.0, 1e5 * (len(rows) + 1), 0.3)
+        r["status"], r["area"], r["mu"] = status, area, 0.01 * area
+        rows.append(r)
+    cases = np.stack(rows)
+    got = drawn_cases(cases)
+    assert got["area"].tolist() == [0.25, 0.125] and (got["status"] == 1).all()
+    assert got["pressure"].tolist() == [1e5, 4e5]
+    assert len(drawn_cases(cases[:0])) == 0

@@ -1,4 +1,5 @@
 """``vecontact status``: progress and failures of a sweep, read from its results file alone."""
+import os
 import subprocess
 import sys
 
@@ -70,7 +71,7 @@ def test_status_into_a_closed_pipe_is_quiet(tmp_path):
     code = ("import os, sys; r, w = os.pipe(); os.close(r); os.dup2(w, 1); "
             "from vecontact.cli import main; sys.exit(main(['status', sys.argv[1]]))")
     for unbuffered in ("", "1"):
-        env = dict(__import__("os").environ, PYTHONUNBUFFERED=unbuffered)
+        env = dict(os.environ, PYTHONUNBUFFERED=unbuffered)
         p = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True,
                            timeout=120, env=env)
         assert p.returncode == 141 and p.stderr == "", (unbuffered, p.returncode, p.stderr)

@@ -31,6 +31,16 @@ def _load(path):
     return job, theory, cases, E0, nu
 
 
+def drawn_cases(cases):
+    """The /cases rows drawn as numerical results: converged ones only (status 1). Rows that did not
+    converge (status -1) carry finite numbers for inspection but are never drawn."""
+    return cases[cases["status"] == 1]
+
+
+def _points(done, q1, v):
+    return done[(done["q1"] == q1) & (done["velocity"] == v)]
+
+
 def _colors(n):
     import matplotlib.pyplot as plt
     cmap = plt.get_cmap("viridis")
@@ -47,7 +57,7 @@ def plot_results(path, outdir=None):
     outdir = outdir or os.path.splitext(path)[0] + "_figures"
     os.makedirs(outdir, exist_ok=True)
     q0 = job["surface"].get("q0")
-    done = cases[cases["status"] == 1] if len(cases) else cases
+    done = drawn_cases(cases)
     velocities = theory[0]["velocity"]
     vcol = dict(zip(velocities, _colors(len(velocities))))
     qcol = _colors(len(theory))
@@ -72,7 +82,7 @@ def plot_results(path, outdir=None):
         s2 = t["slope_rms"] ** 2
         for k, v in enumerate(t["velocity"]):
             ax.loglog(t["area"][k], t["mu"][k] / s2, color=vcol[v], label=f"v = {v:g} m/s")
-            pts = done[(done["q1"] == t["q1"]) & (done["velocity"] == v)] if len(done) else done
+            pts = _points(done, t["q1"], v)
             if len(pts):
                 ax.loglog(pts["area"], pts["mu"] / s2, "o", color=vcol[v], ms=4, mfc="none")
         ax.set_xlabel("A/A$_0$")
@@ -92,7 +102,7 @@ def plot_results(path, outdir=None):
                 scale = E0 * (t["slope_rms"] if scale_name == "slope" else t["xi"][k])
                 ax.loglog(t["pressure"][k] / scale, t["area"][k], color=vcol[v], lw=1,
                           label=f"v = {v:g} m/s" if t is theory[0] else None)
-                pts = done[(done["q1"] == t["q1"]) & (done["velocity"] == v)] if len(done) else done
+                pts = _points(done, t["q1"], v)
                 if len(pts):
                     ax.loglog(pts["pressure"] / scale, pts["area"], "o", color=vcol[v], ms=4, mfc="none")
         if scale_name == "xi":
