@@ -1,0 +1,1 @@
+"""Post-processing of contact maps: morphology statistics (:mod:`vecontact.analysis.morphology`)."""
