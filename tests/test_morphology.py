@@ -175,6 +175,21 @@ def test_diagonal_winding_percolates():
     assert math.isnan(m.anisotropy_moments)
 
 
+def test_open_staircase_longer_than_the_period():
+    # (k, k), (k, k + 1) for k < 20 on a 12 x 30 cell: unwrapped it runs over 20 x indices, more than
+    # the period, without meeting its own image (the y period is 30 > 21). It occupies all 12 x
+    # indices and 21 y indices, and its moments are those of the unwrapped points.
+    k = np.arange(20)
+    x = np.concatenate([k, k])
+    y = np.concatenate([k, k + 1])
+    c = np.zeros((12, 30), dtype=bool)
+    c[x % 12, y] = True
+    m = contact_morphology(c, DX)
+    assert (m.patches, m.percolating) == (1, 0)
+    np.testing.assert_allclose(m.anisotropy_extent, 12 / 21, rtol=RTOL)
+    np.testing.assert_allclose(m.anisotropy_moments, math.sqrt((x.var() + 1 / 12) / (y.var() + 1 / 12)), rtol=RTOL)
+
+
 def smooth_map(shape, fraction, sigma, seed):
     """Periodic smoothed white noise thresholded so that about `fraction` of it is in contact."""
     field = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal(shape), sigma, mode="wrap")
