@@ -4,11 +4,12 @@ Conventions (CONVENTIONS.md section 1): the map is an N x M grid of spacing dx (
 axes) covering a periodic cell; axis 0 is x, the sliding direction (the rubber moves along +x), axis 1
 is y. A pixel is one grid point of area dx^2.
 
-Choices (the usual ones in the rough-contact literature):
+Choices:
 
-* Patches are the **4-connected** components of the contact set **on the torus**: pixels sharing an
-  edge belong to the same patch, diagonal neighbours do not, and pixels that face each other across
-  the periodic edges (row N-1 and row 0, column M-1 and column 0) are neighbours too.
+* Patches are the **4-connected** components of the contact set **on the torus** (4-connectivity is
+  the usual choice in the rough-contact literature): pixels sharing an edge belong to the same patch,
+  diagonal neighbours do not, and pixels that face each other across the periodic edges (row N-1
+  and row 0, column M-1 and column 0) are neighbours too.
   ``scipy.ndimage.label`` labels the pieces inside the cell; pieces touching across the edges are
   merged with ``scipy.sparse.csgraph.connected_components``.
 * A patch is **percolating** when it connects to one of its own periodic images (it wraps around the
