@@ -392,3 +392,44 @@ def test_petsc_options_command_line_wins():
     got = farm._petsc_options(job, ["-snes_type", "vinewtonrsls", "-snes_monitor"])
     assert got == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.1", "snes_monitor": None}
     assert farm._petsc_options(job, ()) == job["numerics"]["petsc"]
+
+
+def test_morphology_columns_are_those_of_the_contact_map(tmp_path):
+    """The /cases morphology columns, computed by the group leader from the gathered contact set
+    (2 ranks, one group of 2), are the morphology of the stored full-resolution contact field."""
+    from vecontact.analysis.morphology import contact_morphology
+    job = write_job(tmp_path / "job.yaml", q1=(4.0e6,), velocity=(1.0,), fields=["contact"], ranks_per_case=2)
+    p = vecontact(2, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    got = cases_of(tmp_path / "out.h5")
+    assert (got["status"] == 1).all() and (got["ranks"] == 2).all() and (got["patches"] >= 1).all()
+    L = 2 * np.pi / 2.5e5
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        for row in got:
+            name = f"q1_{row['q1']:.6e}_seed_{row['seed']}_v_{row['velocity']:.6e}_p_{row['pressure']:.6e}"
+            contact = f["fields"][name]["contact"][()]
+            assert contact.shape == (128, 128)
+            assert contact.mean() == pytest.approx(row["area"], abs=0.5 / 128 ** 2)
+            m = contact_morphology(contact.astype(bool), L / 128)
+            assert int(row["patches"]) == m.patches and int(row["percolating"]) == m.percolating
+            for k in ("mean_patch_area", "perimeter", "anisotropy_extent", "anisotropy_moments"):
+                np.testing.assert_allclose(row[k], getattr(m, k), rtol=1e-12, err_msg=k)
+
+
+def test_q1_option_solves_a_subset_then_the_rest(reference, tmp_path):
+    """``run --q1`` leaves the other q1 to solve; the next run without it completes the same file."""
+    _, ref, _, _ = reference
+    job = write_job(tmp_path / "job.yaml")
+    p = vecontact(0, ["run", job, "--q1", "2e6"], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    part = cases_of(tmp_path / "out.h5")
+    assert len(part) == 6 and set(part["q1"]) == {2.0e6} and set(part["N"]) == {64}
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        assert not f.attrs["complete"]
+    p = vecontact(0, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "6 already finished, 6 to solve" in p.stdout
+    assert_same_results(ref, cases_of(tmp_path / "out.h5"))
+    bad = vecontact(0, ["run", job, "--q1", "3e6"], cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines() == [
+        "vecontact: error: --q1: 3e6 is not one of the job's q1 (2e+06, 4e+06)"]

@@ -69,6 +69,9 @@ BAD = [
     (("numerics.petsc", "-contact_step_area 2"), "numerics.petsc"),
     (("numerics.petsc", {"contact_step_area": "x"}), "numerics.petsc"),
     (("output", "results.txt"), "output"),
+    (("surface.seeds", {"other": [1], "3e6": [2]}), "surface.seeds.3e6"),      # not one of q1
+    (("surface.seeds", {"2e6": [1, 2]}), "surface.seeds"),                     # q1 = 4e6 has none
+    (("surface.seeds", {"2e6": [1, 1], "other": [1]}), "surface.seeds.2e6"),   # duplicate seed
     (("surface", ...), "surface"),
 ]
 
@@ -116,6 +119,26 @@ def test_physics_hash_ignores_output_only():
     c = jobs.resolve(_bad("material.E0", 4.0e6), ROOT)
     assert jobs.physics_hash(a) == jobs.physics_hash(b)
     assert jobs.physics_hash(a) != jobs.physics_hash(c)
+
+
+def test_seeds_per_q1():
+    """A seeds mapping gives the small systems more realisations; the seeds are not physics."""
+    from vecontact import cases as sweep
+    from vecontact.runner import spectra
+    from mpi4py import MPI
+    job = jobs.resolve(_bad("surface.seeds", {"other": [1, 2, 3], 4.0e6: [7]}), ROOT)
+    assert jobs.seeds_for(job["surface"], 2.0e6) == [1, 2, 3] and jobs.seeds_for(job["surface"], 4.0e6) == [7]
+    cs = sweep.expand(job, spectra(job, MPI.COMM_SELF))
+    per_q1 = {q1: sorted({c.seed for c in cs if c.q1 == q1}) for q1 in (2.0e6, 4.0e6)}
+    assert per_q1 == {2.0e6: [1, 2, 3], 4.0e6: [7]}
+    assert len(cs) == (3 + 1) * 2 * 3                   # seeds x velocities x pressures
+    # YAML reads 4e6 as a string and 4.0e+6 as a number: both name q1 = 4e6
+    for key in ("4e6", 4.0e6):
+        assert jobs.seeds_for(jobs.resolve(_bad("surface.seeds", {"other": [1], key: [5]}), ROOT)["surface"],
+                              4.0e6) == [5]
+    flat = jobs.resolve(copy.deepcopy(GOOD), ROOT)
+    assert jobs.seeds_for(flat["surface"], 4.0e6) == [1, 2]
+    assert jobs.physics_hash(flat) == jobs.physics_hash(job)   # resuming with more seeds is allowed
 
 
 def test_petsc_options_forms():
@@ -176,7 +199,8 @@ def test_paper_pressures_span_the_area_range():
     rows, _ = sweep.theory(job, psds, cs)
     for q1 in job["surface"]["q1"]:
         for v in job["sweep"]["velocity"]:
-            area = np.array([rows[c.key]["theory_area"] for c in cs if c.q1 == q1 and c.velocity == v])
+            area = np.array([rows[c.key]["theory_area"] for c in cs
+                             if c.q1 == q1 and c.velocity == v and c.seed == 1])
             assert len(area) == 12
             assert area.min() == pytest.approx(0.005, rel=1e-3)
             assert area.max() == pytest.approx(0.6, rel=1e-3)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vecontact.io.results import empty_row
+from vecontact.job import seeds_for
 from vecontact.physics import spectrum as spectra
 from vecontact.physics.modulus import make_modulus
 from vecontact.physics.theory import erf, persson
@@ -79,7 +80,7 @@ def expand(job, psds):
     """All cases of the job, sorted. ``psds`` maps q1 -> spectrum (callable C(q))."""
     cases = []
     for q1, psd in psds.items():
-        for seed in job["surface"]["seeds"]:
+        for seed in seeds_for(job["surface"], q1):
             for v in job["sweep"]["velocity"]:
                 for p in _pressure_list(job, psd, v):
                     cases.append(Case(float(q1), int(seed), float(v), float(p)))

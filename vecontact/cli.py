@@ -25,6 +25,8 @@ def _parser():
     r.add_argument("--quiet", action="store_true", help="no per-case progress lines")
     r.add_argument("-o", "--output", help="override the job's output file")
     r.add_argument("--no-plot", action="store_true", help="do not draw the figures at the end")
+    r.add_argument("--q1", help="solve only the cases at these q1 (1/m, comma list) in this run; the "
+                                "others stay to solve in the results file (a later run does them)")
     s = sub.add_parser("surface", help="write the job's generated surfaces without solving")
     s.add_argument("job")
     s.add_argument("-o", "--output", required=True, help="HDF5 file for the surfaces")
@@ -42,7 +44,7 @@ def _parser():
 def _split_petsc(argv):
     """Arguments after the job that look like PETSc options (-snes_type newtonls ...)."""
     known, petsc, i = [], [], 0
-    ours = {"--quiet", "--no-plot", "-o", "--output", "-h", "--help", "--version"}
+    ours = {"--quiet", "--no-plot", "-o", "--output", "--q1", "-h", "--help", "--version"}
     while i < len(argv):
         a = argv[i]
         if a.startswith("-") and not a.startswith("--") and a not in ours and len(a) > 2:
@@ -116,7 +118,7 @@ def _dispatch(argv):
             write_job_surfaces(job, args.output, MPI.COMM_WORLD)
             return 0
         from vecontact.runner import run
-        run(job, MPI.COMM_WORLD, quiet=args.quiet, petsc_args=petsc)
+        run(job, MPI.COMM_WORLD, quiet=args.quiet, petsc_args=petsc, only_q1=args.q1)
         if MPI.COMM_WORLD.rank == 0 and not args.no_plot:
             from vecontact.plot import plot_results
             paths = plot_results(job["output"])

@@ -60,6 +60,8 @@ FAULT_ENV = "VECONTACT_TEST_FAULT"
 ABORT_DELAY = 1.0   # s between printing an error and MPI_Abort
 COMMIT_RETRIES, COMMIT_RETRY_DELAY = 3, 2.0   # transient write errors of the results file
 FAIL_GRACE = 20.0   # s a failing rank waits for the coordinator to abort before aborting itself
+MORPHOLOGY_COLUMNS = ("patches", "percolating", "mean_patch_area", "perimeter", "anisotropy_extent",
+                      "anisotropy_moments")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -457,8 +459,8 @@ class _Farm:
         num = job["numerics"]
         self.fields = list(num["fields"])
         self.downsample = int(num["downsample"])
-        self.store = tuple(f for f in ("pressure", "gap", "displacement")
-                           if f in self.fields or (f == "pressure" and "contact" in self.fields))
+        # the pressure always: its contact set gives the morphology columns
+        self.store = tuple(f for f in ("pressure", "gap", "displacement") if f in self.fields or f == "pressure")
         from vecontact.physics.modulus import make_modulus
         self.modulus = make_modulus(job["material"])
         s = job["surface"]
@@ -569,6 +571,12 @@ class _Farm:
         row["N"] = N
         row["ranks"] = group.size
         row["status"] = 1 if res.converged else -1
+        contact = gather_rows(group, fft, (res.pressure > 0).astype(np.uint8))
+        if group.rank == 0:
+            from vecontact.analysis.morphology import contact_morphology
+            m = contact_morphology(contact, self.L / N)
+            for k in MORPHOLOGY_COLUMNS:
+                row[k] = getattr(m, k)
         link = self.write_fields(group, fft, case, res, row) if self.fields else None
         self.current = None
         return res, row, link
@@ -576,28 +584,13 @@ class _Farm:
     def write_fields(self, group, fft, case, res, row):
         """Gather every k-th point of each requested field to the leader, which writes the file."""
         k = self.downsample
-        first = -(-fft.row_start // k) * k
-        local_rows = np.arange(first, fft.row_stop, k) - fft.row_start
-        nrows = np.array(group.allgather(local_rows.size))
-        ncols = -(-fft.N // k)
         arrays = {}
         for name in self.fields:
             src = res.pressure if name == "contact" else getattr(res, name)
             if src is None:
                 continue
-            part = np.asarray(src)[local_rows, ::k]
-            if name == "contact":
-                part = (part > 0).astype(np.uint8)
-            part = np.ascontiguousarray(part, dtype=np.uint8 if name == "contact" else np.float64)
-            if group.size == 1:
-                full = part
-            else:
-                counts = nrows * ncols
-                displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
-                full = np.empty((int(nrows.sum()), ncols), part.dtype) if group.rank == 0 else None
-                mpitype = MPI.UNSIGNED_CHAR if name == "contact" else MPI.DOUBLE
-                group.Gatherv(part, [full, counts, displs, mpitype] if group.rank == 0 else None, root=0)
-            arrays[name] = full
+            src = (np.asarray(src) > 0).astype(np.uint8) if name == "contact" else np.asarray(src, np.float64)
+            arrays[name] = gather_rows(group, fft, src, k)
         if group.rank != 0:
             return None
         attrs = {"q1": case.q1, "seed": case.seed, "velocity": case.velocity, "pressure": case.pressure,
@@ -629,6 +622,22 @@ class _Farm:
                 pass
             time.sleep(0.05)
         _abort(self.comm, text)
+
+
+def gather_rows(group, fft, local, k=1):
+    """Every k-th row and column of a slab-distributed field (local rows [row_start, row_stop) of an
+    N x N grid), gathered to the group's rank 0 (None elsewhere). uint8 or float64 fields."""
+    first = -(-fft.row_start // k) * k
+    part = np.ascontiguousarray(local[np.arange(first, fft.row_stop, k) - fft.row_start, ::k])
+    if group.size == 1:
+        return part
+    nrows = np.array(group.allgather(part.shape[0]))
+    counts = nrows * part.shape[1]
+    displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    full = np.empty((int(nrows.sum()), part.shape[1]), part.dtype) if group.rank == 0 else None
+    mpitype = MPI.UNSIGNED_CHAR if part.dtype == np.uint8 else MPI.DOUBLE
+    group.Gatherv(part, [full, counts, displs, mpitype] if group.rank == 0 else None, root=0)
+    return full
 
 
 def solver_diagnostics(res):
@@ -688,8 +697,9 @@ def _init_petsc(job):
 
 
 # ------------------------------------------------------------------------------------------------
-def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=()):
-    """Solve every unfinished case of the job on ``comm`` and commit each row as it finishes."""
+def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(), only_q1=None):
+    """Solve every unfinished case of the job on ``comm`` (only those at the q1 values in
+    ``only_q1`` when it is given) and commit each row as it finishes."""
     t_start = time.perf_counter()
     petsc_options = _petsc_options(job, petsc_args)     # bad options: InputError on every rank
     rank, size = comm.rank, comm.size
@@ -699,6 +709,8 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
         done = writer.done()
         todo = np.array([c.key not in done for c in cases], dtype=bool)
     todo = comm.bcast(todo, root=0)
+    if only_q1 is not None:
+        todo &= np.array([c.q1 in only_q1 for c in cases], dtype=bool)
     if rank == 0 and writer is not None:
         writer.note_run(petsc_options=petsc_options, ranks_per_case=str(num["ranks_per_case"]))
     _first_commit(comm, writer)
@@ -711,11 +723,12 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     fin = comm.Dup()
     hub = coord = None
     if rank == 0:
-        coord = Coordinator(chains, cases, writer, ndone=int((~todo).sum()), nranks=nwork, quiet=quiet)
+        ndone = len(writer.done()) if writer is not None else 0
+        coord = Coordinator(chains, cases, writer, ndone=ndone, nranks=nwork, quiet=quiet)
         if not quiet:
             rule = ", ".join(f"N={N}: {ranks_for_grid(N, nwork, num['ranks_per_case'])}"
                              for N in sorted(set(Ns.values())))
-            print(f"farm: {len(cases)} cases, {int((~todo).sum())} already finished, {int(todo.sum())} to solve "
+            print(f"farm: {len(cases)} cases, {ndone} already finished, {int(todo.sum())} to solve "
                   f"in {len(chains)} chains on {size} ranks (ranks per case, {num['ranks_per_case']}: {rule}; "
                   f"coordinator {'thread on rank 0' if threaded else 'on rank 0 (dedicated)'})", flush=True)
     hub = _Hub(coord, ctl, comm, threaded) if rank == 0 else _Hub(None, ctl, comm, threaded)

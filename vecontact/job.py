@@ -23,9 +23,10 @@ MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
 FIELDS = ("pressure", "gap", "displacement", "contact")
 SOLVERS = ("snes", "pk")
 
-# Keys that do not change any number in the results: ignored by the restart hash.
+# Keys that do not change any number in the results: ignored by the restart hash. A seed's cases
+# do not depend on the other seeds, so a sweep may be resumed with more (or fewer) seeds.
 NON_PHYSICS = {("output",), ("numerics", "ranks_per_case"), ("numerics", "threads"),
-               ("numerics", "fields"), ("numerics", "downsample")}
+               ("numerics", "fields"), ("numerics", "downsample"), ("surface", "seeds")}
 
 
 # --------------------------------------------------------------------------------------------
@@ -163,7 +164,7 @@ def _surface(job, base):
     else:
         out["hrms"] = _number(s, "hrms", p, lo=0, lo_open=True)
     out["null_band"] = nb = _number(s, "null_band", p, default=8, lo=1)
-    out["seeds"] = _number_list(s, "seeds", p, lo=0, integer=True, default=[1])
+    out["seeds"] = _seeds(s, p, q1)
     out["grid"] = {}
     for v in q1:
         n_float = 2.0 * nb * v / q0
@@ -175,6 +176,39 @@ def _surface(job, base):
             raise InputError(f"{p}.q1", f"grid size N = {n} is too small (need N >= 4)")
         out["grid"][repr(float(v))] = n
     return out
+
+
+def _seeds(s, p, q1):
+    """``seeds``: a list (every q1), or a mapping {q1: list, ..., other: list} so that the small
+    systems get more realisations than the large ones. Resolved to the list, or to
+    {repr(q1): list} for every q1 (read it with :func:`seeds_for`)."""
+    v = s.get("seeds", [1])
+    if not isinstance(v, dict):
+        return _number_list(s, "seeds", p, lo=0, integer=True)
+    name = f"{p}.seeds"
+    other = _number_list(v, "other", name, lo=0, integer=True) if "other" in v else None
+    given = {}
+    for k in v:
+        if k == "other":
+            continue
+        key = _number({"q1": k}, "q1", name)
+        match = [x for x in q1 if abs(x - key) <= 1e-9 * x]
+        if not match:
+            raise InputError(f"{name}.{k}", f"is not one of surface.q1 ({', '.join(f'{x:g}' for x in q1)})")
+        given[repr(float(match[0]))] = _number_list(v, k, name, lo=0, integer=True)
+    out = {}
+    for x in q1:
+        seeds = given.get(repr(float(x)), other)
+        if seeds is None:
+            raise InputError(name, f"gives no seeds for q1 = {x:g} (add it, or an 'other' entry)")
+        out[repr(float(x))] = seeds
+    return out
+
+
+def seeds_for(surface, q1):
+    """The surface realisations (seeds) of a resolved job's surface section at cut-off q1 (1/m)."""
+    seeds = surface["seeds"]
+    return seeds if isinstance(seeds, list) else seeds[repr(float(q1))]
 
 
 def _material(job, base):

@@ -50,7 +50,29 @@ def open_results(job, comm):
     return writer
 
 
-def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=()):
+def select_q1(job, text):
+    """The q1 values (1/m) named by ``--q1`` ("8e6,1.6e7"), each one of the job's; None: all."""
+    if text is None:
+        return None
+    known = [float(q) for q in job["surface"].get("q1", [])]
+    out = []
+    for item in filter(None, (t.strip() for t in str(text).split(","))):
+        try:
+            q = float(item)
+        except ValueError:
+            raise InputError("--q1", f"{item!r} is not a number") from None
+        match = [x for x in known if abs(x - q) <= 1e-9 * x]
+        if not match:
+            raise InputError("--q1", f"{item} is not one of the job's q1 ({', '.join(f'{x:g}' for x in known)})")
+        out.append(match[0])
+    if not out:
+        raise InputError("--q1", "names no q1")
+    return out
+
+
+def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=(), only_q1=None):
+    """Run the job on ``comm``; ``only_q1`` (a "--q1" comma list) restricts which cases this call solves."""
+    only = select_q1(job, only_q1)
     psds = spectra(job, comm)
     cases = sweep.expand(job, psds)
     rows, groups = sweep.theory(job, psds, cases)
@@ -60,7 +82,7 @@ def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=()):
             writer.set_group(name, datasets, attrs)
     if job["numerics"]["enabled"]:
         from vecontact.farm import run_numerics
-        run_numerics(job, comm, writer, cases, rows, psds, quiet=quiet, petsc_args=petsc_args)
+        run_numerics(job, comm, writer, cases, rows, psds, quiet=quiet, petsc_args=petsc_args, only_q1=only)
     elif writer is not None:
         for row in rows.values():
             writer.add_row(row)

@@ -10,6 +10,7 @@ import numpy as np
 import yaml
 
 from vecontact.io.results import case_key, open_for_reading, read_strings
+from vecontact.job import seeds_for
 
 
 def read_status(path):
@@ -22,7 +23,7 @@ def read_status(path):
         for name in f["theory"]:
             g = f["theory"][name]
             q1 = float(g.attrs["q1"])
-            for seed in job["surface"]["seeds"]:
+            for seed in seeds_for(job["surface"], q1):
                 for i, v in enumerate(g["velocity"][()]):
                     expected += [(q1, int(seed), float(v), float(p)) for p in g["pressure"][i]]
         cases = f["cases"][()]

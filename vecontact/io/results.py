@@ -62,6 +62,13 @@ COLUMNS = [
     ("N", "i8", "", "grid points per side"),
     ("ranks", "i8", "", "ranks that solved the case"),
     ("run", "i8", "", "index into /runs of the run that wrote the row (-1: written before /runs existed)"),
+    # contact morphology of the solution (vecontact.analysis.morphology; 4-connected, periodic)
+    ("patches", "i8", "", "contact patches, joined across the periodic boundaries"),
+    ("percolating", "i8", "", "patches that wrap around the period (left out of the anisotropy)"),
+    ("mean_patch_area", "f8", "m^2", "contact area / patches"),
+    ("perimeter", "f8", "m", "total length of the contact boundary in the L x L cell"),
+    ("anisotropy_extent", "f8", "", "mean patch extent along x (sliding) / mean extent along y"),
+    ("anisotropy_moments", "f8", "", "sqrt(sum of patch second moments along x / along y)"),
 ]
 CASE_DTYPE = np.dtype([(n, t) for n, t, _, _ in COLUMNS])
 KEY = ("q1", "seed", "velocity", "pressure")

@@ -56,7 +56,7 @@ def write_job_surfaces(job, path, comm):
     from vecontact.cases import spectrum_for
     from vecontact.core.pfft import SlabFFT
     from vecontact.core.surface import generate, statistics
-    from vecontact.job import grid_size, to_yaml
+    from vecontact.job import grid_size, seeds_for, to_yaml
     from vecontact import __version__
 
     s = job["surface"]
@@ -70,7 +70,7 @@ def write_job_surfaces(job, path, comm):
         n = grid_size(job, q1)
         fft = SlabFFT(comm, n)
         psd = spectrum_for(job, q1)
-        for seed in s["seeds"]:
+        for seed in seeds_for(s, q1):
             h = generate(fft, L, psd, seed, amplitudes=s["amplitudes"])
             items.append((q1, seed, n, fft, h, statistics(fft, h, L), psd))
 
