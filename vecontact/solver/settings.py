@@ -164,22 +164,23 @@ def _check(f, value):
 
 
 # ---------------------------------------------------------------------------------------------------
-# Values vecontact gives PETSc's own options unless the user gives them (RESULTS.md: one table each).
+# Values vecontact gives PETSc's own options unless the user gives them ([RESULTS.md]: measured there).
 
-# SNES of the semismooth Newton method (solver prefix); ksp_gmres_restart comes from restart_max
+# SNES of the semismooth Newton method (solver prefix); ksp_gmres_restart from restart_max; the grid
+# steps' KSP: GMRES, right preconditioning (gridstep.py) [RESULTS.md]
 PETSC_DEFAULTS = {
     "snes_type": "newtonls",
-    "snes_linesearch_type": "basic",          # full steps: PDAS needs no line search
+    "snes_linesearch_type": "basic",          # full Newton steps (primal-dual active set)
     "snes_max_linear_solve_fail": "1000",     # a step capped by its iteration limit is still used
 }
-# -snes_type vinewtonrsls (vi.py): the reduced-space VI Newton method
+# -snes_type vinewtonrsls (vi.py): the reduced-space VI Newton method [RESULTS.md]
 PETSC_VI_DEFAULTS = {
     "ksp_type": "fgmres",
     "ksp_rtol": "1e-3",
     "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (CONVENTIONS 7)
     "snes_linesearch_type": "basic",
 }
-# inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart_max
+# inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart()
 PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres"}
-# global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels instead of the reference BLAS's dgemv
+# global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}
