@@ -131,7 +131,20 @@ def test_newton_step_modes_vs_dense(step, v, sigma0):
     N, name = 32, "hn"
     h = surface(N)
     ref = reference(N, name, v, sigma0)
-    opts = {"contact_step": step}
+    opts = {"vc_contact_step": step}
     res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF, coarse=False,
                         petsc_options=opts)
     compare(res, f, ref, h, sigma0, name, f"snes step={step} v={v}")
+
+
+@pytest.mark.parametrize("N,name,v,sigma0", [(32, "hn", 1.0, 2e4), (32, "hn", 30.0, 5e4),
+                                             (32, "elastic", 0.0, 5e3)])
+def test_vi_vs_dense(N, name, v, sigma0):
+    """PETSc's reduced-space VI Newton method (-snes_type vinewtonrsls, vecontact/solver/vi.py), the
+    alternative to the default: the same exact solution."""
+    h = surface(N)
+    ref = reference(N, name, v, sigma0)
+    res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF,
+                        petsc_options={"snes_type": "vinewtonrsls"})
+    assert res.diagnostics["step_modes"] == [] and res.diagnostics["active_set_changes"] == []
+    compare(res, f, ref, h, sigma0, name, f"vinewtonrsls {name} v={v}")

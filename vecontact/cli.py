@@ -43,19 +43,8 @@ def _parser():
 
 def _split_petsc(argv):
     """Arguments after the job that look like PETSc options (-snes_type newtonls ...)."""
-    known, petsc, i = [], [], 0
-    ours = {"--quiet", "--no-plot", "-o", "--output", "--q1", "-h", "--help", "--version"}
-    while i < len(argv):
-        a = argv[i]
-        if a.startswith("-") and not a.startswith("--") and a not in ours and len(a) > 2:
-            petsc.append(a)
-            if i + 1 < len(argv) and not argv[i + 1].startswith("-"):
-                petsc.append(argv[i + 1])
-                i += 1
-        else:
-            known.append(a)
-        i += 1
-    return known, petsc
+    from vecontact.solver.options import split_argv
+    return split_argv(argv, {"--quiet", "--no-plot", "-o", "--output", "--q1", "-h", "--help", "--version"})
 
 
 def _info():

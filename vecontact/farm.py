@@ -664,10 +664,10 @@ def grid_of(job, q1):
 
 def _petsc_options(job, petsc_args):
     """job's numerics.petsc merged with the command line's PETSc options (command line wins)."""
-    from vecontact.job import _petsc
+    from vecontact.solver.options import parse
     opts = dict(job["numerics"].get("petsc") or {})
     if petsc_args:
-        opts.update(_petsc(list(petsc_args)))
+        opts.update(parse(list(petsc_args), "numerics.petsc"))
     return opts
 
 

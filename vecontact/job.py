@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 from vecontact.errors import InputError
+from vecontact.solver.options import parse as parse_petsc
 
 MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
 FIELDS = ("pressure", "gap", "displacement", "contact")
@@ -308,50 +309,6 @@ def _theory(job):
     return out
 
 
-def _petsc(value):
-    """PETSc options as a dict {name-without-dash: value-string-or-None}."""
-    if value is None:
-        return {}
-    if isinstance(value, dict):
-        items = value.items()
-    elif isinstance(value, (list, str)):
-        tokens = value.split() if isinstance(value, str) else [str(t) for t in value]
-        items, i = [], 0
-        while i < len(tokens):
-            tok = tokens[i]
-            if not tok.startswith("-"):
-                raise InputError("numerics.petsc", f"expected an option starting with '-', got {tok!r}")
-            if i + 1 < len(tokens) and not tokens[i + 1].startswith("-"):
-                items.append((tok, tokens[i + 1]))
-                i += 2
-            else:
-                items.append((tok, None))
-                i += 1
-    else:
-        raise InputError("numerics.petsc", "must be a mapping {option: value} or a list of options")
-    out = {}
-    for k, v in items:
-        k = str(k).lstrip("-")
-        if not k or " " in k:
-            raise InputError("numerics.petsc", f"bad option name {k!r}")
-        if isinstance(v, bool):
-            v = "true" if v else "false"
-        out[k] = None if v is None else str(v)
-    # vecontact's own solver options (see vecontact/solver/snes.py): checked here, not mid-sweep
-    step = out.get("contact_step", "auto")
-    if step not in ("auto", "contact", "free"):
-        raise InputError("numerics.petsc", f"contact_step must be auto, contact or free, got {step!r}")
-    if "contact_step_area" in out:
-        try:
-            area = float(out["contact_step_area"])
-        except (TypeError, ValueError):
-            area = float("nan")
-        if not 0.0 <= area <= 1.0:
-            raise InputError("numerics.petsc",
-                             f"contact_step_area must be a number in [0, 1], got {out['contact_step_area']!r}")
-    return out
-
-
 def _numerics(job, material):
     n = _section(job, "numerics", required=False)
     p = "numerics"
@@ -363,7 +320,7 @@ def _numerics(job, material):
         raise InputError(f"{p}.solver", "pk (Polonsky-Keer) is valid only for elastic materials: "
                                         "the viscoelastic operator is not symmetric")
     out["tolerance"] = _number(n, "tolerance", p, default=1e-8, lo=0, hi=1e-2, lo_open=True)
-    out["petsc"] = _petsc(n.get("petsc"))
+    out["petsc"] = parse_petsc(n.get("petsc"), f"{p}.petsc")
     fields = n.get("fields", [])
     if isinstance(fields, str):
         fields = [fields]

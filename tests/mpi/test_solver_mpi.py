@@ -105,13 +105,16 @@ def test_solver_state_is_freed_collective(comm):
     N^2 arrays) alive; a 4096^2 sweep grew by 0.9 GB per case and rank before this was cleaned up."""
     import gc
     from vecontact.solver.contactset import ContactSetStep
-    from vecontact.solver.snes import _State
+    from vecontact.solver.gridstep import GridStep
+    from vecontact.solver.newton import NewtonState
+    from vecontact.solver.snes import _Semismooth
     N = 48
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=3)
     for step in ("contact", "free"):
         res, _ = solve_full(h, L_PAPER, hn(), 1.0, 2e4, comm=comm,
-                            petsc_options={"contact_step": step})
+                            petsc_options={"vc_contact_step": step})
         assert res.converged
         gc.collect()
-        alive = [type(o).__name__ for o in gc.get_objects() if isinstance(o, (ContactSetStep, _State))]
+        kinds = (ContactSetStep, GridStep, NewtonState, _Semismooth)
+        alive = [type(o).__name__ for o in gc.get_objects() if isinstance(o, kinds)]
         assert alive == [], (step, alive)

@@ -4,11 +4,12 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from mpi4py import MPI
 
 from vecontact.solver.operator import ContactOperator, is_elastic_on_grid
+from vecontact.solver.options import parse, solver_items
 from vecontact.solver.pk import pk_solve
 from vecontact.solver.result import ContactResult, pair_weight, postprocess
+from vecontact.solver.settings import SolverSettings
 from vecontact.solver.warmstart import (bearing_guess, coarse_fft, coarse_levels, fourier_transfer,
                                         prolong_gap, smooth_gap, transfer_real)
 
@@ -16,15 +17,6 @@ __all__ = ["solve_contact"]
 
 _METHODS = ("snes", "pk")
 _STORE = ("pressure", "gap", "displacement")
-
-# coarse-grid settings (see warmstart.py): coarsest grid >= COARSE_MIN_N, at most COARSE_LEVELS levels
-COARSE_MIN_N = 128
-COARSE_LEVELS = 3
-COARSE_TOL = 1e-4
-LIN_RTOL = 0.1          # inner KSP rtol of Newton steps whose active set changed
-COARSE_MAX_IT = 50
-SMOOTH_SWEEPS = 4       # projected-Jacobi sweeps after each prolongation (warmstart.smooth_gap)
-SMOOTH_OMEGA = 0.7
 
 
 def _check_warm(warm, fft):
@@ -40,7 +32,7 @@ def _check_warm(warm, fft):
 
 def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, method="snes",
                   petsc_options=None, warm=None, coarse=True, max_iterations=None,
-                  store=("pressure", "gap", "displacement"), monitor=None):
+                  store=("pressure", "gap", "displacement"), monitor=None, settings=None):
     """Steady sliding contact of a viscoelastic half-space on the rigid rough surface ``h``.
 
     Parameters
@@ -52,18 +44,21 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         force balance); see operator.py
     method : "snes" (PETSc semismooth Newton, any modulus) or "pk" (Polonsky-Keer CG, elastic only:
         ValueError if Im E(q_x v) != 0 anywhere on the grid)
-    petsc_options : dict or list of "-key value" strings for the SNES/KSP (solver prefix added)
+    petsc_options : dict or list of "-key value" strings (options.py): PETSc's options for the SNES/KSP
+        (solver prefix added) and ``-vc_<field>`` overrides of ``settings``
     warm : previous ContactResult on the same grid and decomposition (previous load or velocity of a
         sweep).  snes: its gap, restricted to the coarsest grid, replaces the cold start there (with
         coarse=False the fine grid restarts from it directly); pk: its pressure (rescaled to the new
         sigma0) starts the CG.
-    coarse : snes only; solve on N/8, N/4, N/2 (those >= 128) first, each warm-starting the next by
-        trigonometric interpolation + 4 projected-Jacobi sweeps (see warmstart.py); the coarse grids
-        hold all the roughness of null-band surfaces.  Ignored when N is too small.
-    max_iterations : Newton iterations (snes, fine grid; default 100) or CG iterations (pk, default
-        20000)
+    coarse : snes only; solve on N/8, N/4, N/2 (those >= settings.coarse_min_n, at most
+        settings.coarse_levels of them) first, each warm-starting the next by trigonometric
+        interpolation + settings.smooth_sweeps projected-Jacobi sweeps (see warmstart.py); the coarse
+        grids hold all the roughness of null-band surfaces.  Ignored when N is too small.
+    max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it) or CG
+        iterations (pk, default settings.pk_max_it)
     store : which local fields to return ("pressure", "gap", "displacement")
     monitor : optional callable(level_N, iteration, residual) for progress output
+    settings : SolverSettings (settings.py; default: its defaults), every tuning constant of the solve
 
     Returns a ContactResult; never raises for non-convergence (converged=False, residual, reason).
     """
@@ -78,7 +73,9 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     if not (tolerance > 0):
         raise ValueError("tolerance must be > 0")
     velocity = float(velocity)
-    if method == "pk" and not is_elastic_on_grid(fft, L, modulus, velocity):
+    options, ours = solver_items(parse(petsc_options))
+    cfg = (settings or SolverSettings()).with_options(ours)
+    if method == "pk" and not is_elastic_on_grid(fft, L, modulus, velocity, rtol=cfg.elastic_rtol):
         raise ValueError("method 'pk' (Polonsky-Keer) needs an elastic operator: Im E(q_x v) != 0 on "
                          "this grid at this velocity; use method 'snes'")
     wst = _check_warm(warm, fft) if warm is not None else None
@@ -97,7 +94,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         p0 = None
         if wst is not None and wst.get("pressure") is not None:
             p0 = wst["pressure"]
-        maxit = 20000 if max_iterations is None else int(max_iterations)
+        maxit = cfg.pk_max_it if max_iterations is None else int(max_iterations)
         mon = None if monitor is None else (lambda it, r: monitor(fft.N, it, r))
         phat, ghat, info = pk_solve(op, tol=tolerance, max_iter=maxit, p0=p0, monitor=mon)
         act = phat > 0
@@ -105,7 +102,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     else:
         from vecontact.solver.snes import ncp_solve
         g0 = None
-        lv = coarse_levels(fft.N, comm.size, min_n=COARSE_MIN_N, max_levels=COARSE_LEVELS) if coarse else []
+        lv = coarse_levels(fft.N, comm.size, min_n=cfg.coarse_min_n, max_levels=cfg.coarse_levels) if coarse else []
         if wst is not None and not lv:
             g0 = wst["gap"] / op.ell
         elif lv:
@@ -119,16 +116,15 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 if prev is None and wst is not None:
                     # previous solution of the sweep, restricted to the coarsest grid
                     gw = transfer_real(fft, wst["gap"], fc)
-                    gc0 = smooth_gap(opc, np.maximum(gw / opc.ell, 0.0), SMOOTH_SWEEPS, SMOOTH_OMEGA)
+                    gc0 = smooth_gap(opc, np.maximum(gw / opc.ell, 0.0), cfg.smooth_sweeps, cfg.smooth_omega)
                 elif prev is None:
-                    gc0 = bearing_guess(opc)
+                    gc0 = bearing_guess(opc, cfg.bearing_area_min, cfg.bearing_area_max, cfg.bearing_tol)
                 else:
-                    gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), SMOOTH_SWEEPS,
-                                     SMOOTH_OMEGA)
+                    gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), cfg.smooth_sweeps,
+                                     cfg.smooth_omega)
                 mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
-                gh, ph, _, inf = ncp_solve(opc, gc0, tol=max(COARSE_TOL, tolerance),
-                                           petsc_options=petsc_options, max_it=COARSE_MAX_IT,
-                                           monitor=mon, lin_rtol=LIN_RTOL)
+                gh, ph, _, inf = ncp_solve(opc, gc0, max(cfg.coarse_tol, tolerance), cfg.coarse_max_it, cfg,
+                                           options, monitor=mon)
                 levels_info.append(dict(N=n, iterations=inf["iterations"],
                                         linear_iterations=inf["linear_iterations"],
                                         converged=inf["converged"], residual=inf["residual"],
@@ -136,13 +132,12 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 prev = (opc, gh, ph)
             if prev is not None:
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
-                g0 = smooth_gap(op, g0, SMOOTH_SWEEPS, SMOOTH_OMEGA)
+                g0 = smooth_gap(op, g0, cfg.smooth_sweeps, cfg.smooth_omega)
         if g0 is None:
-            g0 = bearing_guess(op)
-        maxit = 100 if max_iterations is None else int(max_iterations)
+            g0 = bearing_guess(op, cfg.bearing_area_min, cfg.bearing_area_max, cfg.bearing_tol)
+        maxit = cfg.newton_max_it if max_iterations is None else int(max_iterations)
         mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
-        ghat, phat, act, info = ncp_solve(op, g0, tol=tolerance, petsc_options=petsc_options,
-                                          max_it=maxit, monitor=mon, lin_rtol=LIN_RTOL)
+        ghat, phat, act, info = ncp_solve(op, g0, tolerance, maxit, cfg, options, monitor=mon)
         levels_info.append(dict(N=fft.N, iterations=info["iterations"],
                                 linear_iterations=info["linear_iterations"],
                                 converged=info["converged"], residual=info["residual"],

@@ -22,22 +22,16 @@ A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little
 
 Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B).  The inner KSP has the
 options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning, so its residual norm
-is the gap error on C in units of h_rms).
+is the gap error on C in units of h_rms; restart SolverSettings.inner_restart).
 """
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["ContactSetStep", "INNER_RESTART_MAX"]
+from vecontact.solver.settings import PETSC_INNER_DEFAULTS
 
-INNER_RESTART_MAX = 100
-INNER_MEMORY = 1.5e9   # bytes per rank for the inner FGMRES basis (2 (restart + 1) vectors)
-
-
-def inner_restart(n_local):
-    """FGMRES restart of the inner solve: INNER_RESTART_MAX, capped by INNER_MEMORY bytes per rank."""
-    return int(max(10, min(INNER_RESTART_MAX, INNER_MEMORY // (16 * max(n_local, 1)) - 1)))
+__all__ = ["ContactSetStep"]
 
 
 class _Restricted:
@@ -70,16 +64,19 @@ class _Restricted:
 class ContactSetStep:
     """Python PC of the outer (Newton) KSP: y = J^{-1} x exactly, up to the inner KSP's tolerance.
 
-    ``set_active(act)`` must be called with the contact set of the current Jacobian before ``apply``.
-    Attributes after each apply: ``last_iterations``; ``iterations`` accumulates them.
+    ``activate(ksp)`` makes the next Newton steps contact-set steps (the outer KSP becomes ``preonly``);
+    ``set_active(act, n_active)`` must give the contact set of the current Jacobian before ``apply``.
+    ``iterations`` accumulates the inner Krylov iterations of the ``solves`` applies.  ``release()``
+    destroys the inner KSP and its operators and removes the option defaults it put in.
     """
 
-    def __init__(self, op, kappa, PETSc, prefix, restart=None):
+    def __init__(self, op, kappa, PETSc, prefix, settings):
         self.op = op
         self.fft = fft = op.fft
         self.comm = fft.comm
         self.kappa = float(kappa)
         self.PETSc = PETSc
+        self.settings = settings
         self.shape = fft.local_real_shape
         self.buf = fft.real_array()     # zero outside C (maintained by set_active)
         self.out = fft.real_array()
@@ -89,27 +86,30 @@ class ContactSetStep:
         self.n_C = 0
         self.iterations = 0
         self.solves = 0
-        self.last_iterations = 0
-        self.restart = restart
-        self._A = None
+        self._A = self._b = self._y = None
         self.ksp = PETSc.KSP().create(comm=self.comm)
-        self.ksp.setOptionsPrefix(prefix + "contact_")
         self._prefix = prefix + "contact_"
+        self.ksp.setOptionsPrefix(self._prefix)
         self._configured = False
         self._own_keys = []
+
+    def activate(self, ksp):
+        """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
+        ksp.setType("preonly")
+        ksp.getPC().setPythonContext(self)
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
         """Mean over the (global) contact set of the C-vector ``a``."""
         return self.fft.sum(a) / self.n_C
 
-    def set_active(self, act):
-        """New contact set ``act`` (bool, local rows; non-empty globally)."""
+    def set_active(self, act, n_active):
+        """New contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""
         PETSc = self.PETSc
         self.buf.flat[self.idx] = 0.0
         idx = np.flatnonzero(act.ravel())
         n_loc = int(idx.size)
-        n_C = self.comm.allreduce(n_loc, op=MPI.SUM)
+        n_C = int(n_active)
         if n_C == 0:
             raise ValueError("empty contact set")
         np.logical_not(act, out=self.freef, casting="unsafe")
@@ -130,11 +130,9 @@ class ContactSetStep:
         self.n_C = n_C
         self.ksp.setOperators(self._A)
         if not self._configured:
-            restart = self.restart
-            if restart is None:
-                restart = self.comm.allreduce(inner_restart(n_loc), op=MPI.MIN)
+            restart = self.comm.allreduce(self.settings.inner_restart(n_loc), op=MPI.MIN)
             opts = PETSc.Options()
-            for k, v in (("ksp_type", "fgmres"), ("ksp_gmres_restart", str(restart))):
+            for k, v in dict(PETSC_INNER_DEFAULTS, ksp_gmres_restart=str(restart)).items():
                 if not opts.hasName(self._prefix + k):
                     opts[self._prefix + k] = v
                     self._own_keys.append(self._prefix + k)
@@ -168,8 +166,7 @@ class ContactSetStep:
         b -= self.mean_C(b)
         self._y.set(0.0)
         self.ksp.solve(self._b, self._y)
-        self.last_iterations = self.ksp.getIterationNumber()
-        self.iterations += self.last_iterations
+        self.iterations += self.ksp.getIterationNumber()
         self.solves += 1
         w.flat[idx] += self._y.getArray(readonly=True)    # s
         fft.apply(w, self.op.c, xo)                       # c s
@@ -179,7 +176,7 @@ class ContactSetStep:
         xo += e
 
     def release(self):
-        for obj in (self._A, getattr(self, "_b", None), getattr(self, "_y", None), self.ksp):
+        for obj in (self._A, self._b, self._y, self.ksp):
             if obj is not None:
                 obj.destroy()
         opts = self.PETSc.Options()

@@ -41,7 +41,7 @@ def modulus_on_grid(fft, L, modulus, velocity):
     return E.reshape(fft.N, 1)
 
 
-def is_elastic_on_grid(fft, L, modulus, velocity, rtol=1e-12):
+def is_elastic_on_grid(fft, L, modulus, velocity, rtol):
     """True when Im E(q_x v) == 0 (relative to |E|, rtol) for every q_x of the grid."""
     E = modulus_on_grid(fft, L, modulus, velocity)
     return bool(np.all(np.abs(E.imag) <= rtol * np.abs(E)))

@@ -30,8 +30,9 @@ def coarse_fft(fft, n):
     return f
 
 
-def coarse_levels(N, size, min_n=128, max_levels=2):
-    """Coarse grid sizes (coarsest first) below N: N/2, N/4 while >= min_n and even."""
+def coarse_levels(N, size, min_n, max_levels):
+    """Coarse grid sizes (coarsest first) below N: N/2, N/4, ... while >= min_n (and >= 2 rows per
+    rank of ``size``) and even, at most ``max_levels`` of them."""
     levels = []
     n = N
     while len(levels) < max_levels and n % 2 == 0 and n // 2 >= min_n and n // 2 >= 2 * size:
@@ -127,11 +128,11 @@ def transfer_real(src, f, dst):
     return dst.backward(G)
 
 
-def bearing_guess(op, area=None):
+def bearing_guess(op, area_min, area_max, tol, area=None):
     """Cold-start gap (nondimensional) of a rigid flat at the height that cuts the fraction ``area``
-    of the surface: g^ = max(delta - h^, 0).  Default ``area``: Persson's estimate
-    erf(sqrt(2) (1 - nu^2) sigma0 / X) with X^2 = sum_q |q|^2 |E(q_x v)|^2 |h_q|^2 (the grid version of
-    E0 xi(v) of CONVENTIONS section 5), clipped to [1e-4, 0.9]."""
+    of the surface: g^ = max(delta - h^, 0), delta by bisection to ``tol`` (h_rms).  Default ``area``:
+    Persson's estimate erf(sqrt(2) (1 - nu^2) sigma0 / X) with X^2 = sum_q |q|^2 |E(q_x v)|^2 |h_q|^2 (the
+    grid version of E0 xi(v) of CONVENTIONS section 5), clipped to [area_min, area_max]."""
     import math
     fft = op.fft
     N = op.N
@@ -144,20 +145,20 @@ def bearing_guess(op, area=None):
             area = math.erf(math.sqrt(2.0) * (1.0 - op.nu ** 2) * op.sigma0 / math.sqrt(X2))
         else:
             area = 1.0
-        area = min(max(area, 1e-4), 0.9)
+        area = min(max(area, area_min), area_max)
     hh = op.hhat
     lo = fft.comm.allreduce(float(hh.min()) if hh.size else np.inf, op=MPI.MIN)
     hi = fft.comm.allreduce(float(hh.max()) if hh.size else -np.inf, op=MPI.MAX)
     n2 = float(N) ** 2
-    for _ in range(60):
+    while hi - lo >= tol:   # False for NaN heights too
         mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:   # the floating-point resolution of the heights is reached
+            break
         frac = fft.comm.allreduce(int(np.count_nonzero(hh >= mid)), op=MPI.SUM) / n2
         if frac > area:
             lo = mid
         else:
             hi = mid
-        if hi - lo < 1e-9:
-            break
     g = np.maximum(hi - hh, 0.0)
     return g
 
@@ -174,7 +175,7 @@ def prolong_gap(src_op, ghat, phat, dst_op):
     return np.where(pi > dst_op.kappa * gi, 0.0, np.maximum(gi, 0.0))
 
 
-def smooth_gap(op, ghat, sweeps=4, omega=0.7):
+def smooth_gap(op, ghat, sweeps, omega):
     """Projected-Jacobi smoothing of the NCP after a prolongation (one FFT pair per sweep):
     g <- max(0, g - omega p(g) / m_max), m_max = max_q |m_q| (so every Fourier mode is damped,
     |1 - omega m_q / m_max| < 1 for loss angles below ~60 degrees).  Removes the grid-scale errors of

@@ -1,0 +1,124 @@
+"""The one PETSc-options parser (vecontact/solver/options.py) and SolverSettings (settings.py): pure,
+no PETSc and no MPI needed."""
+import dataclasses
+
+import pytest
+
+from vecontact.errors import InputError
+from vecontact.solver.options import OptionError, parse, solver_items, split_argv
+from vecontact.solver.settings import SolverSettings, gmres_restart
+
+CLI_OURS = {"--quiet", "--no-plot", "-o", "--output", "-h", "--help", "--version"}
+
+
+def test_forms_agree():
+    """A mapping, a string and command-line tokens give the same options."""
+    text = "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor -snes_rtol -1e-3 -vc_restart_max 60"
+    want = {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None, "snes_rtol": "-1e-3",
+            "vc_restart_max": "60"}
+    assert parse(text) == want
+    assert parse(text.split()) == want
+    assert parse(["-snes_type vinewtonrsls", "-ksp_rtol 0.001 -snes_monitor", "-snes_rtol", "-1e-3",
+                  "-vc_restart_max 60"]) == want
+    assert parse({"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3, "snes_monitor": None, "snes_rtol": "-1e-3",
+                  "vc_restart_max": 60}) == want
+    _, tokens = split_argv(["run", "job.yaml"] + text.split(), CLI_OURS)
+    assert parse(tokens) == want
+    assert parse(None) == {} and parse("") == {} and parse([]) == {}
+
+
+@pytest.mark.parametrize("text, want", [
+    ("-a -5 -b", {"a": "-5", "b": None}),                 # a negative number is a value
+    ("-a +.5e+3", {"a": "+.5e+3"}),
+    ("-a -1. -b 2", {"a": "-1.", "b": "2"}),
+    ("-a -inf", {"a": None, "inf": None}),               # not a decimal number: a name
+    ("-a -b -c x", {"a": None, "b": None, "c": "x"}),     # flags
+    ("-ksp_type gmres -ksp_type bcgs", {"ksp_type": "bcgs"}),   # the last one wins
+    ("-a true -b false", {"a": "true", "b": "false"}),
+])
+def test_value_rules(text, want):
+    assert parse(text) == want
+
+
+def test_mapping_values():
+    got = parse({"a": True, "b": False, "c": None, "d": "", "e": 3, "-f": "x"})
+    assert got == {"a": "true", "b": "false", "c": None, "d": None, "e": "3", "f": "x"}
+
+
+@pytest.mark.parametrize("value, problem", [
+    ("gmres -ksp_type", "expected an option"),
+    ("-1e-3", "expected an option"),
+    ("--ksp_rtol 1", "bad option name"),
+    ("-ksp_rtol=1e-3", "bad option name"),
+    ({"a b": 1}, "bad option name"),
+    ({"": 1}, "bad option name"),
+    ({"ksp_rtol": [1, 2]}, "single value"),
+    (3, "mapping"),
+    ("-vc_restart_max 6e1", "integer"),
+    ("-vc_restart_max", "needs a value"),
+    ("-vc_lin_rtol x", "number"),
+    ("-vc_lin_rtol 2", "outside"),
+    ("-vc_lin_rtol nan", "finite"),
+    ("-vc_contact_step sideways", "auto, contact, free"),
+    ("-vc_no_such_knob 1", "unknown solver setting"),
+    ("-contact_step free", "renamed -vc_contact_step"),
+    ("-contact_step_area 0.2", "renamed -vc_contact_step_area"),
+    ("-snes_type vinewtonssls", "removed"),
+])
+def test_errors_name_the_key(value, problem):
+    """Bad options: an OptionError that is an InputError (one line, the caller's key) and a ValueError."""
+    with pytest.raises(OptionError, match=problem) as err:
+        parse(value, "numerics.petsc")
+    assert isinstance(err.value, InputError) and isinstance(err.value, ValueError)
+    assert err.value.key == "numerics.petsc" and "\n" not in str(err.value)
+
+
+def test_split_argv():
+    argv = ["run", "job.yaml", "-snes_rtol", "-1e-3", "--quiet", "-o", "out.h5", "-snes_monitor",
+            "-ksp_type", "gmres", "--no-plot"]
+    known, tokens = split_argv(argv, CLI_OURS)
+    assert known == ["run", "job.yaml", "--quiet", "-o", "out.h5", "--no-plot"]
+    assert tokens == ["-snes_rtol", "-1e-3", "-snes_monitor", "-ksp_type", "gmres"]
+
+
+def test_solver_items_split_ours_from_petsc():
+    petsc, ours = solver_items(parse("-ksp_type bcgs -vc_restart_max 60"))
+    assert petsc == {"ksp_type": "bcgs"} and ours == {"vc_restart_max": "60"}
+
+
+# ---------------------------------------------------------------------------------------- settings
+def test_settings_options_override_fields():
+    s = SolverSettings().with_options(parse("-vc_restart_max 60 -vc_lin_rtol 0.05 -vc_contact_step free "
+                                            "-ksp_type bcgs"))
+    assert (s.restart_max, s.lin_rtol, s.contact_step) == (60, 0.05, "free")
+    assert isinstance(s.restart_max, int)
+    base = SolverSettings(smooth_sweeps=2)
+    assert base.with_options({}) == base and base.with_options(parse("-vc_coarse_levels 1")).smooth_sweeps == 2
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.lin_rtol = 0.2
+
+
+def test_settings_check_their_ranges():
+    for bad in (dict(lin_rtol=0.0), dict(restart_max=1.5), dict(contact_step_area=1.2),
+                dict(bearing_area_min=0.5, bearing_area_max=0.4), dict(smooth_omega=float("inf")),
+                dict(coarse_levels=True)):
+        with pytest.raises(ValueError):
+            SolverSettings(**bad)
+
+
+def test_step_area_by_grid_size():
+    s = SolverSettings()
+    assert s.step_area(512) == s.step_area(2048) == s.contact_step_area == 0.3
+    assert s.step_area(4096) == s.step_area(8192) == s.contact_step_area_large == 0.15
+
+
+def test_restart_lengths():
+    """The cap, unless the basis exceeds the memory budget: 4096^2 on 2 ranks (8 Mi local points,
+    3 GB): GMRES 43, FGMRES 21; never below restart_min."""
+    s = SolverSettings()
+    n = 4096 * 2048
+    assert s.restart(n, vectors=1) == 43 and s.restart(n, vectors=2) == 21
+    assert s.restart(1000) == s.restart_max == 120
+    assert s.restart(10 ** 10) == s.restart_min == 10
+    assert s.inner_restart(1000) == s.inner_restart_max == 100
+    assert s.inner_restart(n) == gmres_restart(n, 1.5e9, 2, 100, 10) == 10

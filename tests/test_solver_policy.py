@@ -1,0 +1,96 @@
+"""The step policy of the Newton solve (vecontact/solver/policy.py): pure rules, tested without PETSc.
+
+Tolerances are products of the decimal settings, so they are compared to rounding (rel 1e-15)."""
+import pytest
+
+from vecontact.solver.policy import StepPolicy, choose_step, tighten_steps
+from vecontact.solver.settings import SolverSettings
+
+S = SolverSettings()
+ROUND = dict(rel=1e-15)
+
+
+@pytest.mark.parametrize("changes, residuals, tighter", [
+    ([-1, 69409, 29531], [1e-1, 1e-2, 1e-3], True),     # 4096^2, 1 m/s, 28 %: shrinks only 2.4x: wanders
+    ([-1, 3035, 340], [1e-1, 1e-2, 1e-3], False),      # shrinks 9x: keep the loose steps
+    ([-1, 3035, 340, 3], [1, 0.1, 0.01, 1e-3], False),
+    ([-1, 100, 120], [1e-1, 1e-2, 1e-3], True),        # grew
+    ([-1, 100, 10], [1e-1, 1e-2, 2e-2], True),         # the residual did not fall
+    ([-1, 100], [1e-1, 1e-2], False),                  # one step says nothing
+    ([-1, 100, 0], [1e-1, 1e-2, 1e-3], False),
+    ([-1, 0, 0], [1e-1, 1e-2, 1e-3], False),
+])
+def test_tighten_steps(changes, residuals, tighter):
+    """Tighter steps when the set changes grow or shrink by less than 1 / wander_ratio (= 3.3x) per
+    step, or when the residual does not fall."""
+    assert S.wander_ratio == 0.3
+    assert tighten_steps(changes, residuals, S.wander_ratio) is tighter
+
+
+def test_choose_step():
+    n = 64.0 ** 2
+    area = S.step_area(64)
+    assert choose_step("auto", int(area * n), n, area) == "contact"
+    assert choose_step("auto", int(area * n) + 1, n, area) == "free"
+    assert choose_step("contact", n, n, area) == "contact" and choose_step("free", 1, n, area) == "free"
+
+
+def _run(policy, steps):
+    """Feed (residual of the iterate, active-set change, mode) per Newton step; the tolerances."""
+    out = []
+    for res, change, mode in steps:
+        policy.record_residual(res)
+        out.append(policy.step(change, mode))
+    return out
+
+
+def test_loose_while_the_set_changes_then_exact():
+    atol = 1e-8 / 2.0
+    p = StepPolicy(S, atol)
+    got = _run(p, [(1.0, -1, "contact"), (0.1, 3035, "contact"), (0.01, 340, "free"), (1e-3, 0, "free"),
+                   (1e-4, 0, "contact")])
+    first, changing, grid, exact, retry = got
+    # first step of a level: 10x tighter, contact-set atol x inner_atol_factor
+    assert first[0] == pytest.approx(S.first_rtol_factor * S.lin_rtol, **ROUND)
+    assert first[1] == pytest.approx(atol * S.inner_atol_factor, **ROUND) and first[2] == S.lin_maxit_changing
+    assert changing == (S.lin_rtol, pytest.approx(atol * S.inner_atol_factor, **ROUND), S.lin_maxit_changing)
+    assert grid == (S.lin_rtol, atol, S.lin_maxit_changing)        # shrank 9x: no tightening
+    assert exact == (S.exact_rtol, atol, S.ksp_max_it)              # the set stopped changing
+    # the exact step did not converge: atol x atol_retry_factor
+    assert retry[0] == S.exact_rtol and retry[2] == S.ksp_max_it
+    assert retry[1] == pytest.approx(atol * S.atol_retry_factor * S.inner_atol_factor, **ROUND)
+    assert p.changes == [-1, 3035, 340, 0, 0]
+
+
+def test_wandering_tightens_down_to_the_floors():
+    """Each wandering step: rtol x tighten_factor down to lin_rtol_min, the iteration cap x
+    tighten_maxit_factor up to ksp_max_it."""
+    p = StepPolicy(S, 1.0)
+    steps = [(1.0, -1, "free")] + [(0.5 ** k, 1000, "free") for k in range(1, 10)]
+    got = _run(p, steps)
+    rtols = [t[0] for t in got[1:]]
+    caps = [t[2] for t in got[1:]]
+    assert rtols[0] == S.lin_rtol and caps[0] == S.lin_maxit_changing     # one change says nothing
+    assert rtols[1] == pytest.approx(S.tighten_factor * S.lin_rtol, **ROUND)
+    assert caps[1] == S.tighten_maxit_factor * S.lin_maxit_changing
+    assert rtols[-1] == S.lin_rtol_min and caps[-1] == S.ksp_max_it
+    assert all(a >= b for a, b in zip(rtols, rtols[1:])) and all(a <= b for a, b in zip(caps, caps[1:]))
+
+
+def test_stalled_residual_tightens():
+    p = StepPolicy(S, 1.0)
+    got = _run(p, [(1.0, -1, "free"), (0.1, 500, "free"), (0.2, 10, "free")])
+    assert got[2][0] == pytest.approx(S.tighten_factor * S.lin_rtol, **ROUND)
+
+
+def test_users_petsc_options_decide():
+    """own=False (the user gave -ksp_rtol, -snes_ksp_ew, ...): no tolerances, the history still kept."""
+    p = StepPolicy(S, 1.0, own=False)
+    assert _run(p, [(1.0, -1, "free"), (0.1, 5, "contact")]) == [None, None]
+    assert p.changes == [-1, 5] and p.residuals == [1.0, 0.1]
+
+
+def test_policy_reads_its_settings():
+    s = SolverSettings(lin_rtol=0.3, first_rtol_factor=0.5, lin_maxit_changing=7, inner_atol_factor=2.0)
+    first = StepPolicy(s, 1.0).step(-1, "contact")
+    assert first == (pytest.approx(0.15, **ROUND), 2.0, 7)

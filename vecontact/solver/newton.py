@@ -1,0 +1,74 @@
+"""NewtonState: the iterate of a Newton solve on one grid, its pressure and its active set.
+
+Nondimensional (operator.py): the gap g^ in h_rms, the pressure p^(g^) = 1 + m (g^ + h^) in sigma0.
+The active (contact) set of the semismooth method is C = {p^ >= kappa g^}, kappa = k h_rms / sigma0.
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+__all__ = ["NewtonState"]
+
+
+class NewtonState:
+    """Iterate g^, cached pressure p^(g^) and active set of the ContactOperator ``op`` (local rows).
+
+    ``ensure(g)`` makes (g, p) the pressure of the iterate g (one FFT pair when g is new);
+    ``update_active_set()`` moves to the active set of the current iterate and counts its changes.
+    """
+
+    def __init__(self, op):
+        self.op = op
+        self.fft = op.fft
+        self.comm = op.fft.comm
+        self.shape = op.fft.local_real_shape
+        self.kappa = op.kappa
+        self.n_points = float(op.N) ** 2
+        self.g = self.fft.real_array()     # the iterate whose pressure is cached
+        self.p = self.fft.real_array()     # p^(g)
+        self.valid = False                 # False until the first ensure()
+        self.act = np.zeros(self.shape, dtype=bool)
+        self.nact = 0                      # points in act, all ranks
+        self.updates = 0                   # update_active_set calls so far
+
+    def view(self, vec, readonly=True):
+        """A PETSc Vec of the grid as an array of the local rows."""
+        return vec.getArray(readonly=readonly).reshape(self.shape)
+
+    def ensure(self, g):
+        """Make sure (self.g, self.p) is the iterate g (recompute p if not)."""
+        if self.valid and np.array_equal(g, self.g):
+            return
+        np.copyto(self.g, g)
+        self.op.pressure(self.g, self.p)
+        self.valid = True
+
+    def update_active_set(self):
+        """C = {p^ >= kappa g^} of the current iterate (never empty: mean p^ = 1 > 0, so the most
+        compressed point is taken if no point qualifies).  Returns how many points changed since the
+        previous call, -1 on the first."""
+        comm = self.comm
+        act = self.p >= self.kappa * self.g
+        nact = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+        if nact == 0:
+            val = self.p - self.kappa * self.g
+            loc = float(val.max()) if val.size else -np.inf
+            best = comm.allreduce((loc, comm.rank), op=MPI.MAXLOC)
+            if comm.rank == best[1] and val.size:
+                act.flat[int(np.argmax(val))] = True
+            nact = 1
+        change = -1 if self.updates == 0 else comm.allreduce(int(np.count_nonzero(act != self.act)), op=MPI.SUM)
+        self.act = act
+        self.nact = nact
+        self.updates += 1
+        return change
+
+    def contact_set(self):
+        """{p^ >= kappa g^} of the cached iterate (local rows): the returned solution's contact set."""
+        return self.p >= self.kappa * self.g
+
+    def measures(self, act=None):
+        """(complementarity, penetration, force) of the cached iterate (operator.py), all ranks; ``act``
+        is its contact_set() if given."""
+        return self.op.measures(self.g, self.p, self.contact_set() if act is None else act)

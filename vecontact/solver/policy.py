@@ -1,0 +1,91 @@
+"""Step policy of the inexact semismooth Newton method: pure rules (no PETSc, no MPI, no arrays).
+
+Before every Newton step the solver (snes.py) asks where to solve the step's linear system
+(``choose_step``: on the contact set or on the whole grid) and how tightly (``StepPolicy.step``), given
+the active-set changes and the convergence measures of the iterates so far.  The constants are
+SolverSettings fields (settings.py); what they were measured on is in benchmarks/RESULTS.md.
+
+Tolerances (rtol, atol, max_it) of a step's Krylov solve:
+
+* the first step of a grid level (change -1) decides the set the others refine: first_rtol_factor x
+  lin_rtol, at most lin_maxit_changing iterations;
+* while the active set changes: lin_rtol, at most lin_maxit_changing iterations, both tightened
+  (x tighten_factor down to lin_rtol_min, x tighten_maxit_factor up to ksp_max_it) whenever
+  ``tighten_steps`` says the steps make too little progress;
+* once the set stopped changing the step is the solution (PDAS converges in one more step): exact_rtol,
+  ksp_max_it iterations, and the absolute tolerance decides.  atol = tol / kappa bounds the free-set
+  residual in h_rms (its 2-norm bounds the max-norm measure); a contact-set step's residual is a gap
+  error on C whose image under m is what the measure sees, hence inner_atol_factor x atol.  If an exact
+  step on an unchanged set still did not converge, atol x atol_retry_factor.
+"""
+from __future__ import annotations
+
+__all__ = ["StepPolicy", "tighten_steps", "choose_step"]
+
+
+def tighten_steps(changes, residuals, wander_ratio):
+    """True when the inexact Newton steps must be solved tighter.
+
+    ``changes``: active-set changes per Newton step (-1 for the first); ``residuals``: the convergence
+    measure per iterate.  Tighten when the set changes shrink by less than 1 / wander_ratio per step
+    (this includes growing: the steps' errors flip points, more so at large N and v), or when the
+    residual did not fall (the first step often overshoots, hence from the third iterate on).
+    """
+    wandering = len(changes) >= 3 and changes[-2] > 0 and changes[-1] > wander_ratio * changes[-2]
+    stalled = len(residuals) >= 3 and residuals[-1] >= residuals[-2]
+    return wandering or stalled
+
+
+def choose_step(requested, n_active, n_points, area):
+    """"contact" (solve the step on the contact set) or "free" (on the whole grid).
+
+    ``requested``: the contact_step setting (auto, contact, free); auto takes contact-set steps while
+    the active set has at most ``area`` x ``n_points`` of the grid's points."""
+    if requested != "auto":
+        return requested
+    return "contact" if n_active <= area * n_points else "free"
+
+
+class StepPolicy:
+    """Krylov tolerances of the Newton steps of one SNES solve (see the module docstring).
+
+    ``atol``: the absolute tolerance of an exact grid step (tol / kappa, h_rms units); ``own``: False
+    when the user's PETSc options (-ksp_rtol, -snes_ksp_ew, ...) decide the tolerances instead.
+    ``changes`` and ``residuals`` keep the history the rules read (and the solver reports).
+    """
+
+    def __init__(self, settings, atol, own=True):
+        self.settings = settings
+        self.own = own
+        self.lin_rtol = settings.lin_rtol
+        self.atol = atol
+        self.maxit_changing = settings.lin_maxit_changing
+        self.changes = []
+        self.residuals = []
+
+    def record_residual(self, residual):
+        """The convergence measure of the latest iterate."""
+        self.residuals.append(residual)
+
+    def step(self, change, mode):
+        """(rtol, atol, max_it) of the next step's Krylov solve, or None when ``own`` is False.
+
+        ``change``: how many points the active set changed by in this Newton step (-1: first step);
+        ``mode``: where the step is solved (choose_step)."""
+        s = self.settings
+        ch = self.changes
+        ch.append(change)
+        if not self.own:
+            return None
+        if change == 0 and len(ch) >= 2 and ch[-2] == 0:
+            # the previous step was already exact on this set and did not converge: the 2-norm
+            # tolerance was too loose for the max-norm measure
+            self.atol *= s.atol_retry_factor
+        if tighten_steps(ch, self.residuals, s.wander_ratio):
+            self.lin_rtol = max(s.tighten_factor * self.lin_rtol, s.lin_rtol_min)
+            self.maxit_changing = min(s.tighten_maxit_factor * self.maxit_changing, s.ksp_max_it)
+        atol = self.atol * (s.inner_atol_factor if mode == "contact" else 1.0)
+        if change == 0:
+            return s.exact_rtol, atol, s.ksp_max_it
+        rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
+        return rtol, atol, min(s.ksp_max_it, self.maxit_changing)

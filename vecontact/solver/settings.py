@@ -1,0 +1,186 @@
+"""Every tuning constant of the exact solver: one frozen dataclass, one line a field.
+
+Units: everything is nondimensional (gaps in h_rms, pressures in sigma0, see operator.py) or a count;
+areas are fractions A/A0 of the grid; memories are bytes per rank.  The measurements behind the
+defaults marked [RESULTS.md] are in benchmarks/RESULTS.md, one table per setting.
+
+Overrides, the last one wins:
+
+1. the defaults below;
+2. ``solve_contact(..., settings=SolverSettings(restart_max=60))`` (library use);
+3. the PETSc-style option ``-vc_<field> <value>`` (PREFIX = "vc_") in ``numerics.petsc`` or on the
+   command line (``vecontact run job.yaml -vc_restart_max 60``), read by the one options parser
+   (vecontact/solver/options.py) and checked when the job is loaded.  These options set fields only:
+   they never reach PETSc's options database.
+
+PETSc's own options keep their names and their usual effect (``-snes_*``, ``-ksp_*`` for the grid
+steps, ``-contact_ksp_*`` for the inner solve of the contact-set steps); the values vecontact gives them
+unless the user does are the PETSC_* tables at the end.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+
+__all__ = ["SolverSettings", "PREFIX", "PETSC_DEFAULTS", "PETSC_VI_DEFAULTS", "PETSC_INNER_DEFAULTS",
+           "PETSC_GLOBAL_DEFAULTS", "gmres_restart"]
+
+PREFIX = "vc_"
+
+
+def _knob(default, doc, lo=None, hi=None, lo_open=False, choices=None):
+    """A field: its default, its one-line meaning and its allowed range [lo, hi] ((lo, hi] with lo_open)."""
+    return field(default=default, metadata=dict(doc=doc, lo=lo, hi=hi, lo_open=lo_open, choices=choices))
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Tuning constants of solve_contact (contact.py), the semismooth Newton solve (snes.py, policy.py,
+    contactset.py, gridstep.py), the warm starts (warmstart.py), Polonsky-Keer (pk.py) and operator.py."""
+
+    # --- Newton iterations and the Krylov tolerances of their steps (policy.py)
+    newton_max_it: int = _knob(100, "Newton iterations on the finest grid (numerics.max_iterations wins)", lo=1)
+    lin_rtol: float = _knob(0.1, "Krylov rtol of a Newton step whose active set changed", lo=0, hi=1, lo_open=True)
+    lin_rtol_min: float = _knob(1e-6, "lin_rtol is never tightened below this", lo=0, hi=1, lo_open=True)
+    first_rtol_factor: float = _knob(0.1, "first step of each grid level: rtol = this x lin_rtol [RESULTS.md]",
+                                     lo=0, hi=1, lo_open=True)
+    exact_rtol: float = _knob(1e-14, "rtol once the active set stopped changing (the atol decides)",
+                              lo=0, hi=1, lo_open=True)
+    lin_maxit_changing: int = _knob(40, "Krylov iteration cap of a step whose active set changed [RESULTS.md]",
+                                    lo=1)
+    ksp_max_it: int = _knob(400, "Krylov iteration cap of any Newton step (and of the VI steps)", lo=1)
+    wander_ratio: float = _knob(0.3, "set changes shrinking < 1/this per step: tighten [RESULTS.md]",
+                                lo=0, lo_open=True)
+    tighten_factor: float = _knob(0.1, "tightening multiplies lin_rtol by this", lo=0, hi=1, lo_open=True)
+    tighten_maxit_factor: int = _knob(2, "tightening multiplies lin_maxit_changing by this (up to ksp_max_it)",
+                                      lo=1)
+    atol_retry_factor: float = _knob(0.03, "atol x this when an exact step on an unchanged set did not converge",
+                                     lo=0, hi=1, lo_open=True)
+    inner_atol_factor: float = _knob(5.0, "contact-set steps: atol x this (a gap error on C) [RESULTS.md]",
+                                     lo=0, lo_open=True)
+    # --- where a Newton step is solved: on the contact set or on the whole grid
+    contact_step: str = _knob("auto", "auto (by contact_step_area), contact or free (the whole grid)",
+                              choices=("auto", "contact", "free"))
+    contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 (N <= ..._large_n) [RESULTS.md]",
+                                     lo=0, hi=1)
+    contact_step_area_large: float = _knob(0.15, "auto: the same on grids N > contact_step_large_n [RESULTS.md]",
+                                           lo=0, hi=1)
+    contact_step_large_n: int = _knob(2048, "grid size above which contact_step_area_large applies", lo=0)
+    # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
+    restart_max: int = _knob(120, "GMRES restart of the grid steps (-ksp_gmres_restart wins) [RESULTS.md]",
+                             lo=1)
+    restart_memory: float = _knob(3e9, "bytes per rank for the grid steps' Krylov basis [RESULTS.md]",
+                                  lo=0, lo_open=True)
+    inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
+    inner_restart_memory: float = _knob(1.5e9, "bytes per rank for the inner FGMRES basis", lo=0, lo_open=True)
+    restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
+    # --- coarse grids and warm starts (contact.py, warmstart.py)
+    coarse_min_n: int = _knob(128, "coarsest grid size (N/2, N/4, ... down to this)", lo=2)
+    coarse_levels: int = _knob(3, "coarse grids at most", lo=0)
+    coarse_tol: float = _knob(1e-4, "convergence tolerance on the coarse grids (the fine one's if larger)",
+                              lo=0, hi=1, lo_open=True)
+    coarse_max_it: int = _knob(50, "Newton iterations per coarse grid", lo=1)
+    smooth_sweeps: int = _knob(4, "projected-Jacobi sweeps after each prolongation", lo=0)
+    smooth_omega: float = _knob(0.7, "their damping (< 2; every mode damped below ~60 deg loss angle)",
+                                lo=0, hi=2, lo_open=True)
+    bearing_area_min: float = _knob(1e-4, "cold start: Persson's A/A0 estimate clipped to at least this",
+                                    lo=0, hi=1, lo_open=True)
+    bearing_area_max: float = _knob(0.9, "... and to at most this", lo=0, hi=1, lo_open=True)
+    bearing_tol: float = _knob(1e-9, "cold start: bisection tolerance of the flat's height (h_rms)",
+                               lo=0, lo_open=True)
+    # --- the other methods
+    pk_max_it: int = _knob(20000, "Polonsky-Keer CG iterations (numerics.max_iterations wins)", lo=1)
+    elastic_rtol: float = _knob(1e-12, "method pk: |Im E| <= this |E| on every q_x counts as elastic", lo=0)
+
+    def __post_init__(self):
+        for f in fields(self):
+            _check(f, getattr(self, f.name))
+        if self.bearing_area_min > self.bearing_area_max:
+            raise ValueError(f"bearing_area_min {self.bearing_area_min} > bearing_area_max {self.bearing_area_max}")
+
+    # ------------------------------------------------------------------ derived values
+    def step_area(self, N):
+        """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set (N x N grid)."""
+        return self.contact_step_area if N <= self.contact_step_large_n else self.contact_step_area_large
+
+    def restart(self, n_local, vectors=1):
+        """GMRES restart of the grid steps (GMRES: 1 basis vector an iteration, FGMRES: 2)."""
+        return gmres_restart(n_local, self.restart_memory, vectors, self.restart_max, self.restart_min)
+
+    def inner_restart(self, n_local):
+        """FGMRES restart of the inner solve of the contact-set steps (n_local: local contact points)."""
+        return gmres_restart(n_local, self.inner_restart_memory, 2, self.inner_restart_max, self.restart_min)
+
+    # ------------------------------------------------------------------ options
+    def with_options(self, options):
+        """A copy with the ``-vc_<field>`` entries of ``options`` (a parsed options dict, see
+        options.parse) applied; other entries are ignored.  ValueError names a bad one."""
+        known = {f.name: f for f in fields(self)}
+        changes = {}
+        for key, text in options.items():
+            if not key.startswith(PREFIX):
+                continue
+            name = key[len(PREFIX):]
+            if name not in known:
+                raise ValueError(f"-{key}: unknown solver setting (known: {', '.join(sorted(known))})")
+            changes[name] = _convert(known[name], key, text)
+        try:
+            return replace(self, **changes)
+        except ValueError as exc:
+            raise ValueError(f"-{PREFIX}{exc}") from None
+
+
+def gmres_restart(n_local, memory, vectors, cap, minimum):
+    """Restart length: ``cap``, reduced so that ``vectors`` x (restart + 1) basis vectors of ``n_local``
+    doubles fit in ``memory`` bytes, never below ``minimum`` (4096^2 on 2 ranks, 3 GB: GMRES 43, FGMRES 21)."""
+    return int(max(minimum, min(cap, memory // (8 * vectors * max(n_local, 1)) - 1)))
+
+
+def _convert(f, key, text):
+    """The option's text as the field's type (bool is no field type)."""
+    if text is None:
+        raise ValueError(f"-{key}: needs a value")
+    kind = type(f.default)
+    try:
+        return kind(text)
+    except ValueError:
+        raise ValueError(f"-{key}: expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+
+
+def _check(f, value):
+    m = f.metadata
+    if m["choices"] is not None:
+        if value not in m["choices"]:
+            raise ValueError(f"{f.name}: expected one of {', '.join(m['choices'])}, got {value!r}")
+        return
+    kind = type(f.default)
+    if isinstance(value, bool) or not isinstance(value, kind if kind is int else (int, float)) \
+            or not math.isfinite(value):
+        raise ValueError(f"{f.name}: expected {'an integer' if kind is int else 'a finite number'}, got {value!r}")
+    lo, hi = m["lo"], m["hi"]
+    if (lo is not None and (value <= lo if m["lo_open"] else value < lo)) or (hi is not None and value > hi):
+        rng = f"{'(' if m['lo_open'] else '['}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+        raise ValueError(f"{f.name}: {value!r} is outside {rng}")
+
+
+# ---------------------------------------------------------------------------------------------------
+# Values vecontact gives PETSc's own options unless the user gives them ([RESULTS.md]: measured there).
+
+# SNES of the semismooth Newton method (solver prefix); ksp_gmres_restart from restart_max; the grid
+# steps' KSP: GMRES, right preconditioning (gridstep.py) [RESULTS.md]
+PETSC_DEFAULTS = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "basic",          # full Newton steps (primal-dual active set)
+    "snes_max_linear_solve_fail": "1000",     # a step capped by its iteration limit is still used
+}
+# -snes_type vinewtonrsls (vi.py): the reduced-space VI Newton method [RESULTS.md]
+PETSC_VI_DEFAULTS = {
+    "ksp_type": "fgmres",
+    "ksp_rtol": "1e-3",
+    "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (CONVENTIONS 7)
+    "snes_linesearch_type": "basic",
+}
+# inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart()
+PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres"}
+# global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
+PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}
