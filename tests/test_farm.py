@@ -20,9 +20,15 @@ from mpi_util import ROOT, mpiexec
 SCRIPTS = os.path.join(ROOT, "tests", "scripts")
 sys.path.insert(0, SCRIPTS)
 
-from vecontact import farm  # noqa: E402
+from vecontact.farm import FAULT_ENV, schedule  # noqa: E402
+from vecontact.farm.progress import Progress  # noqa: E402
+from vecontact.farm.run import petsc_options  # noqa: E402
+from vecontact.farm.schedule import Finished, Split, Stop, Work  # noqa: E402
+from vecontact.farm.transport import WIDTH, Request, pack, unpack  # noqa: E402
+from vecontact.farm.worker import fault_targets  # noqa: E402
 from vecontact.cases import Case  # noqa: E402
 from vecontact.io.results import CASE_DTYPE, empty_row  # noqa: E402
+from vecontact.rows import case_key  # noqa: E402
 
 MAIN = os.path.join(SCRIPTS, "farm_main.py")
 
@@ -48,7 +54,7 @@ def write_job(path, output="out.h5", q1=(2.0e6, 4.0e6), velocity=(0.01, 1.0), se
 
 def env_for(extra=None):
     env = dict(os.environ)
-    for k in ("PMI_RANK", "PMI_SIZE", farm.FAULT_ENV):
+    for k in ("PMI_RANK", "PMI_SIZE", FAULT_ENV):
         env.pop(k, None)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     env.setdefault("OMP_NUM_THREADS", "1")
@@ -100,14 +106,14 @@ def assert_same_results(a, b, N_min=64):
 # ------------------------------------------------------------------------------------------------
 # scheduling rules
 def test_ranks_per_case_rule():
-    auto = farm.ranks_for_grid
+    auto = schedule.ranks_for_grid
     assert [auto(N, 4096) for N in (64, 512, 1024, 2048, 4096, 8192)] == [1, 1, 1, 4, 16, 64]
     assert auto(4096, 8) == 8            # never more than the ranks available
     assert auto(8, 100, 16) == 4         # never more than N / 2
     assert auto(512, 100, 3) == 3
-    assert farm.split_factor(16, 4, 2048) == 4
-    assert farm.split_factor(3, 2, 4) == 2   # 3 ranks > N/2: split even though 3 // 2 == 1
-    assert farm.split_factor(5, 16, 4096) == 1
+    assert schedule.split_factor(16, 4, 2048) == 4
+    assert schedule.split_factor(3, 2, 4) == 2   # 3 ranks > N/2: split even though 3 // 2 == 1
+    assert schedule.split_factor(5, 16, 4096) == 1
 
 
 def _cases(q1s=(1e6, 2e6), seeds=(1,), vs=(0.1, 1.0), ps=(1.0, 2.0, 3.0, 4.0)):
@@ -119,7 +125,7 @@ def test_chains_largest_first_and_rising_pressure():
     N = {1e6: 64, 2e6: 2048}
     todo = np.ones(len(cases), bool)
     todo[[0, 5]] = False
-    chains = farm.build_chains(cases, todo, N.get, 64)
+    chains = schedule.build_chains(cases, todo, N.get, 64)
     assert [ch.N for ch in chains] == [2048, 2048, 64, 64]
     assert chains[0].g == 4 and chains[-1].g == 1
     for ch in chains:
@@ -130,10 +136,11 @@ def test_chains_largest_first_and_rising_pressure():
 
 
 def _simulate(nranks, cases, N, rpc="auto", durations=None, seed=0):
-    """Discrete-event run of the Coordinator with groups that split like the real farm."""
+    """Discrete-event run of the Coordinator with groups that split like the real farm: each group
+    reports Finished and acts on Work / Split / Stop."""
     rng = np.random.default_rng(seed)
-    chains = farm.build_chains(cases, np.ones(len(cases), bool), N.get, nranks, rpc)
-    coord = farm.Coordinator(chains, cases, writer=None, nranks=nranks)
+    chains = schedule.build_chains(cases, np.ones(len(cases), bool), N.get, nranks, rpc)
+    coord = schedule.Coordinator(chains, cases, writer=None)
     solved, order = [], []
     # event queue: (time, leader, group size, finished)
     events = [(0.0, 0, nranks, None)]
@@ -141,23 +148,23 @@ def _simulate(nranks, cases, N, rpc="auto", durations=None, seed=0):
         events.sort(key=lambda e: e[0])
         t, leader, gsize, fin = events.pop(0)
         action = coord.request(leader, gsize, fin)
-        kind, a, b = action
-        if kind == farm.STOP:
+        if isinstance(action, Stop):
             continue
-        if kind == farm.SPLIT:
-            for i in range(a):
-                lo, hi = farm.split_range(gsize, a, i)
+        if isinstance(action, Split):
+            for i in range(action.k):
+                lo, hi = schedule.split_range(gsize, action.k, i)
                 events.append((t, leader + lo, hi - lo, None))
             continue
-        ch = chains[a]
-        idx = ch.cases[b]
+        assert isinstance(action, Work)
+        ch = chains[action.chain]
+        idx = ch.cases[action.start]
         assert gsize <= max(1, ch.N // 2)
         order.append((t, ch.N))
         solved.append(idx)
         row = empty_row()
         row["status"], row["seconds"], row["ranks"] = 1, 1.0, gsize
         dt = (durations or {}).get(ch.N, 1.0) * (0.5 + rng.random()) * ch.g / gsize
-        events.append((t + dt, leader, gsize, (a, b, row, None, "")))
+        events.append((t + dt, leader, gsize, Finished(action.chain, action.start, row)))
     assert coord.active == 0
     return solved, order, coord
 
@@ -183,20 +190,99 @@ def test_coordinator_steals_when_idle():
     assert coord.steals >= 1
 
 
+def test_messages_one_chain_on_two_ranks(tmp_path):
+    """The coordinator's answers, message by message, for one chain of 8 cases (N = 64, one rank
+    per case) on 2 ranks: the farm's group splits, the idle group steals the unstarted half
+    [4, 8), a second steal takes [7, 8) from it, and each row reaches the results file once."""
+    from vecontact.io.results import ResultsFile, read_cases
+    cases = _cases(q1s=(1e6,), vs=(1.0,), ps=range(1, 9))
+    chains = schedule.build_chains(cases, np.ones(8, bool), {1e6: 64}.get, 2)
+    writer = ResultsFile.open(str(tmp_path / "r.h5"), "", "h", 2)
+    coord = schedule.Coordinator(chains, cases, writer)
+
+    def done(pos):
+        row = empty_row()
+        row["q1"], row["seed"], row["velocity"], row["pressure"] = cases[chains[0].cases[pos]].key
+        row["status"], row["seconds"], row["ranks"] = 1, 1.0, 1
+        return Finished(0, pos, row, None, {"reason": "converged"})
+
+    script = [((0, 2, None), Split(2)),
+              ((0, 1, None), Work(0, 0, 8)),
+              ((1, 1, None), Work(0, 4, 8)),              # steal: the unstarted half of [0, 8)
+              ((0, 1, done(0)), Work(0, 1, 4)),           # the owner hears of its shorter range
+              ((1, 1, done(4)), Work(0, 5, 8)),
+              ((0, 1, done(1)), Work(0, 2, 4)),
+              ((0, 1, done(2)), Work(0, 3, 4)),
+              ((0, 1, done(3)), Work(0, 7, 8)),           # steal again: [5, 8) -> [5, 7) and [7, 8)
+              ((1, 1, done(5)), Work(0, 6, 7)),
+              ((1, 1, done(6)), Stop()),                  # nothing unstarted is left
+              ((0, 1, done(7)), Stop())]
+    for (leader, gsize, fin), expected in script:
+        action = coord.request(leader, gsize, fin)
+        assert action == expected and type(action) is type(expected), (leader, fin, action)
+    assert coord.active == 0 and coord.splits == 1 and coord.steals == 2
+    assert coord.nsolved == coord.ndone == 8 and coord.nfailed == 0
+    assert coord.commit_pending() and not coord.commit_pending()   # nothing new: no second commit
+    got = read_cases(writer.path)
+    assert [case_key(r) for r in got] == [c.key for c in cases]
+
+
+@pytest.mark.parametrize("nranks", [3, 64])
+def test_messages_on_a_simulated_farm(nranks):
+    """Every answer of a simulated farm (_simulate) is a well-formed message: Work within its chain,
+    a group's next Work continues at start + 1 inside a range that only shrinks, Split(k >= 2),
+    and one Stop per group (1 + the groups the splits added)."""
+    cases = _cases(q1s=(1e6, 2e6, 4e6), seeds=(1, 2), vs=(0.1, 1.0, 10.0), ps=range(1, 9))
+    N = {1e6: 256, 2e6: 1024, 4e6: 2048}
+    _, _, coord = _simulate(nranks, cases, N, durations={256: 0.1, 1024: 1.0, 2048: 5.0})
+    last = {}                   # leader -> its last Work
+    stops, added = 0, 0
+    for leader, action in coord.log:
+        assert isinstance(action, (Work, Split, Stop))
+        if isinstance(action, Work):
+            assert 0 <= action.start < action.stop <= len(coord.chains[action.chain].cases)
+            prev = last.get(leader)
+            if prev is not None and prev.chain == action.chain and action.start == prev.start + 1:
+                assert action.stop <= prev.stop
+            last[leader] = action
+        elif isinstance(action, Split):
+            assert action.k >= 2
+            added += action.k - 1
+        else:
+            stops += 1
+    assert stops == 1 + added == 1 + sum(a.k - 1 for _, a in coord.log if isinstance(a, Split))
+
+
+def test_messages_survive_the_wire():
+    """Actions cross to the group as an int64 buffer (pack/unpack), requests as pickles."""
+    import pickle
+    buf = np.zeros(WIDTH, np.int64)
+    for action in (Work(3, 5, 9), Split(4), Stop()):
+        pack(action, buf)
+        got = unpack(buf)
+        assert got == action and type(got) is type(action)
+    row = empty_row()
+    row["area"] = 0.25
+    req = pickle.loads(pickle.dumps(Request(2, Finished(1, 2, row, "x.fields/a.h5", {"reason": "converged"}))))
+    assert type(req) is Request and type(req.finished) is Finished and req.size == 2
+    assert req.finished[:2] == (1, 2) and req.finished.row["area"] == 0.25
+    assert req.finished.link == "x.fields/a.h5" and req.finished.diagnostics == {"reason": "converged"}
+
+
 def test_fault_targets():
     cases = _cases()
-    t = farm.fault_targets(cases, f"1:3, 0:{cases[5].name},junk,2:nosuchcase")
+    t = fault_targets(cases, f"1:3, 0:{cases[5].name},junk,2:nosuchcase")
     assert t == {(1, 3), (0, 5)}
-    assert farm.fault_targets(cases, "") == set()
+    assert fault_targets(cases, "") == set()
 
 
 def test_progress_line_marks_failures():
     cases = _cases()
-    chains = farm.build_chains(cases, np.ones(len(cases), bool), {1e6: 64, 2e6: 64}.get, 1)
-    coord = farm.Coordinator(chains, cases, nranks=1)
+    chains = schedule.build_chains(cases, np.ones(len(cases), bool), {1e6: 64, 2e6: 64}.get, 1)
+    progress = Progress(cases, chains, nranks=1)
     row = np.zeros((), CASE_DTYPE)
     row["status"], row["residual"], row["N"], row["ranks"] = -1, 3e-4, 64, 1
-    line = coord.progress_line(0, row, "max_it")
+    line = progress.line(0, row, "max_it")
     assert "NOT CONVERGED" in line and "3.00e-04" in line and f"/{len(cases)}]" in line
 
 
@@ -349,7 +435,7 @@ def test_refusals(reference, tmp_path):
 def test_fault_on_one_rank_ends_the_job(tmp_path):
     job = write_job(tmp_path / "job.yaml", ranks_per_case=2)
     t = time.time()
-    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={farm.FAULT_ENV: "1:4"})
+    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={FAULT_ENV: "1:4"})
     assert time.time() - t < 60
     assert p.returncode != 0
     text = p.stdout + p.stderr
@@ -361,7 +447,7 @@ def test_fault_on_one_rank_ends_the_job(tmp_path):
 
 def test_fault_on_rank0_with_two_groups(tmp_path):
     job = write_job(tmp_path / "job.yaml", ranks_per_case=1)
-    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={farm.FAULT_ENV: "0:0,1:0"})
+    p = vecontact(2, ["run", job], cwd=tmp_path, timeout=60, env={FAULT_ENV: "0:0,1:0"})
     assert p.returncode != 0
     assert (p.stdout + p.stderr).count("Traceback (most recent call last)") == 1, p.stdout + p.stderr
     assert "injected fault in case 0" in p.stderr
@@ -389,9 +475,9 @@ def test_not_converged_recorded_and_fields(tmp_path):
 
 def test_petsc_options_command_line_wins():
     job = {"numerics": {"petsc": {"snes_type": "newtonls", "ksp_rtol": "0.1"}}}
-    got = farm._petsc_options(job, ["-snes_type", "vinewtonrsls", "-snes_monitor"])
+    got = petsc_options(job, ["-snes_type", "vinewtonrsls", "-snes_monitor"])
     assert got == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.1", "snes_monitor": None}
-    assert farm._petsc_options(job, ()) == job["numerics"]["petsc"]
+    assert petsc_options(job, ()) == job["numerics"]["petsc"]
 
 
 def test_morphology_columns_are_those_of_the_contact_map(tmp_path):

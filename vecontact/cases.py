@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vecontact.io.results import empty_row
 from vecontact.job import seeds_for
 from vecontact.physics import spectrum as spectra
 from vecontact.physics.modulus import make_modulus
 from vecontact.physics.theory import erf, persson
+from vecontact.rows import theory_row
 
 CURVE_POINTS = 80
 # erfinv range of the dense theory curves: A/A0 from about 1e-3 to 0.95
@@ -108,11 +108,7 @@ def theory(job, psds, cases):
         for c in mine:
             r = per_v[velocities.index(c.velocity)]
             k = r_pressures(mine, c.velocity).index(c.pressure)
-            row = empty_row()
-            row["q1"], row["seed"], row["velocity"], row["pressure"] = c.key
-            row["theory_area"], row["theory_mu"] = r.area[0, k], r.mu[0, k]
-            row["xi"], row["slope_rms"] = r.xi[0], r.slope_rms
-            rows[c.key] = row
+            rows[c.key] = theory_row(c.key, r.area[0, k], r.mu[0, k], r.xi[0], r.slope_rms)
         # dense curves along the master curve for the figures
         curve_p = CURVE_X[None, :] * E0 * xi[:, None] / (np.sqrt(2.0) * (1 - nu ** 2))
         curves = [_theory(job, psd, [v], curve_p[k]) for k, v in enumerate(velocities)]

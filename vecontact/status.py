@@ -9,8 +9,9 @@ import json
 import numpy as np
 import yaml
 
-from vecontact.io.results import case_key, open_for_reading, read_strings
+from vecontact.io.results import open_for_reading, read_strings
 from vecontact.job import seeds_for
+from vecontact.rows import REASON, case_key
 
 
 def read_status(path):
@@ -67,7 +68,7 @@ def format_status(path, st):
     if failed:
         lines.append("NOT converged (their numerical columns are not results):")
         for r, d in failed:
-            reason = json.loads(d).get("reason", "?") if d else "?"
+            reason = json.loads(d).get(REASON, "?") if d else "?"
             lines.append(f"  q1={r['q1']:.4g} seed={r['seed']} v={r['velocity']:.4g} p={r['pressure']:.4g}: "
                          f"residual {r['residual']:.2e}, {reason}, {r['iterations']} Newton steps")
     if st["runs"]:

@@ -7,7 +7,7 @@ Layout (see README, "Results file"):
   the latest run);
 - ``/cases``: compound dataset, one row per finished (q1, seed, velocity, pressure) case,
   sorted by those four columns; attribute ``units`` (JSON {column: unit}) and ``status_codes``;
-  column ``run`` indexes ``/runs``;
+  column ``run`` indexes ``/runs``; the columns are those of :mod:`vecontact.rows`;
 - ``/runs``: one JSON object per invocation that wrote the file (a restarted sweep has several):
   code version and git commit of the running code, start time, ranks, host, command line, PETSc
   options, library versions;
@@ -34,62 +34,9 @@ import numpy as np
 
 from vecontact import __version__
 from vecontact.errors import InputError, ResultsFileError
+from vecontact.rows import CASE_DTYPE, COLUMNS, STATUS_CODES, case_key, empty_row
 
 FORMAT = "vecontact-results/1"
-
-# (name, dtype, unit, description)
-COLUMNS = [
-    ("q1", "f8", "1/m", "large-wavevector roughness cut-off"),
-    ("seed", "i8", "", "surface realisation"),
-    ("velocity", "f8", "m/s", "sliding speed"),
-    ("pressure", "f8", "Pa", "nominal pressure sigma0"),
-    ("theory_area", "f8", "", "Persson A/A0 = P(q1)"),
-    ("theory_mu", "f8", "", "Persson viscoelastic friction coefficient"),
-    ("xi", "f8", "", "effective rms slope xi(v)"),
-    ("slope_rms", "f8", "", "rms slope <|grad h|^2>^1/2 of the spectrum"),
-    ("status", "i1", "", "1 converged, -1 not converged, 0 theory only"),
-    ("area", "f8", "", "numerical A/A0"),
-    ("mu", "f8", "", "numerical friction, dissipation estimate"),
-    ("mu_geometric", "f8", "", "numerical friction, <p dh/dx>/sigma0"),
-    ("mean_gap", "f8", "m", "mean interfacial gap"),
-    ("rigid_position", "f8", "m", "rigid-body position of the rubber"),
-    ("converged", "?", "", "numerical solve converged"),
-    ("iterations", "i8", "", "nonlinear iterations"),
-    ("linear_iterations", "i8", "", "Krylov iterations"),
-    ("fft_pairs", "f8", "", "FFT pairs, fine-grid equivalent"),
-    ("residual", "f8", "", "final scale-free residual"),
-    ("seconds", "f8", "s", "wall time of the solve"),
-    ("N", "i8", "", "grid points per side"),
-    ("ranks", "i8", "", "ranks that solved the case"),
-    ("run", "i8", "", "index into /runs of the run that wrote the row (-1: written before /runs existed)"),
-    # contact morphology of the solution (vecontact.analysis.morphology; 4-connected, periodic)
-    ("patches", "i8", "", "contact patches, joined across the periodic boundaries"),
-    ("percolating", "i8", "", "patches that wrap around the period (left out of the anisotropy)"),
-    ("mean_patch_area", "f8", "m^2", "contact area / patches"),
-    ("perimeter", "f8", "m", "total length of the contact boundary in the L x L cell"),
-    ("anisotropy_extent", "f8", "", "mean patch extent along x (sliding) / mean extent along y"),
-    ("anisotropy_moments", "f8", "", "sqrt(sum of patch second moments along x / along y)"),
-]
-CASE_DTYPE = np.dtype([(n, t) for n, t, _, _ in COLUMNS])
-KEY = ("q1", "seed", "velocity", "pressure")
-STATUS_CODES = "1: converged; -1: not converged (numerical columns are NOT results); 0: theory only"
-
-
-def empty_row():
-    """A row with numerical columns set to 'absent' (NaN / -1 / False)."""
-    row = np.zeros((), dtype=CASE_DTYPE)
-    for name, t, _, _ in COLUMNS:
-        if t == "f8":
-            row[name] = np.nan
-        elif t == "i8":
-            row[name] = -1
-    row["status"] = 0
-    row["converged"] = False
-    return row
-
-
-def case_key(row):
-    return (float(row["q1"]), int(row["seed"]), float(row["velocity"]), float(row["pressure"]))
 
 
 def git_commit(where=None):
