@@ -34,7 +34,6 @@ How each peer is driven (see benchmarks/PEERS.md):
 Contact area: fraction of points with p > 0.  Mean gap: g = u - h shifted so that its mean over the
 contact points is 0, set to 0 on them, averaged over the grid (the same as vecontact's <g>).
 """
-import io
 import json
 import os
 import re
