@@ -116,6 +116,17 @@ def _number_list(d, key, path, *, lo=None, lo_open=False, integer=False, default
     return out
 
 
+def _columns(d, path, names):
+    """``columns`` of a table file: None (the file has exactly these columns) or a list naming one
+    column per entry of ``names`` by 0-based index or header name (checked against the file later)."""
+    v = d.get("columns")
+    if v is not None and (not isinstance(v, list) or len(v) != len(names)
+                          or not all(isinstance(c, (int, str)) and not isinstance(c, bool) for c in v)):
+        raise InputError(f"{path}.columns", f"must list {len(names)} columns ({', '.join(names)}): 0-based "
+                                            f"indices or header names, got {v!r}")
+    return v
+
+
 def _path(d, key, path, base, must_exist=True):
     name = f"{path}.{key}"
     v = d.get(key)
@@ -216,10 +227,7 @@ def _surface_psd(job, s, p, base, common, out):
     _unknown(s, p, common | {"file", "dimension", "columns", "length", "q1"})
     out["file"] = _path(s, "file", p, base)
     out["dimension"] = _number(s, "dimension", p, default=2, integer=True, lo=1, hi=2)
-    cols = s.get("columns")
-    if cols is not None and (not isinstance(cols, list) or len(cols) != 2):
-        raise InputError(f"{p}.columns", f"must list 2 columns (q, C): 0-based indices or header names, got {cols!r}")
-    out["columns"] = cols
+    out["columns"] = cols = _columns(s, p, ("q", "C"))
     psd = read_psd(out["file"], out["dimension"], key=f"{p}.file", columns=cols)
     out["sha256"] = _file_hash(out["file"])
     length = _number(s, "length", p, required=False, lo=0, lo_open=True)
@@ -319,10 +327,7 @@ def _material(job, base):
         from vecontact.physics.modulus import FREQUENCY_UNITS, MODULUS_UNITS
         out["frequency_unit"] = _choice(m, "frequency_unit", p, tuple(FREQUENCY_UNITS), default="rad/s")
         out["modulus_unit"] = _choice(m, "modulus_unit", p, tuple(MODULUS_UNITS), default="Pa")
-        out["columns"] = m.get("columns")
-        if out["columns"] is not None and (not isinstance(out["columns"], list) or len(out["columns"]) != 3):
-            raise InputError(f"{p}.columns", "must list 3 columns (frequency, E', E''): 0-based indices "
-                                             f"or header names, got {out['columns']!r}")
+        out["columns"] = _columns(m, p, ("frequency", "E'", "E''"))
         out["vertical_shift"] = _number(m, "vertical_shift", p, default=1.0, lo=0, lo_open=True)
         wlf = m.get("wlf")
         if wlf is not None:
