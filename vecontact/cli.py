@@ -6,9 +6,10 @@ without a traceback and without writing anything.
 import argparse
 import os
 import sys
+import warnings
 
 from vecontact import __version__
-from vecontact.errors import InputError
+from vecontact.errors import InputError, InputWarning
 
 
 class _Parser(argparse.ArgumentParser):
@@ -118,8 +119,16 @@ def _dispatch(argv):
     return 2
 
 
+def _warning_line(message, category, filename, lineno, line=None, _default=warnings.formatwarning):
+    """InputWarning as one line, like the errors; any other warning as Python prints it."""
+    if issubclass(category, InputWarning):
+        return f"vecontact: warning: {message}\n"
+    return _default(message, category, filename, lineno, line)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
+    warnings.formatwarning = _warning_line
     try:
         rc = _dispatch(argv)
         sys.stdout.flush()

@@ -15,3 +15,8 @@ class InputError(Exception):
 
 class ResultsFileError(InputError):
     """A results file that cannot be reused (foreign job, corrupted, changed physics)."""
+
+
+class InputWarning(UserWarning):
+    """An input that works but deserves a look (e.g. a master curve that does not cover the
+    frequencies the job needs: it is extrapolated). The command line prints it as one line."""

@@ -21,6 +21,7 @@ from vecontact.errors import InputError
 from vecontact.solver.options import parse as parse_petsc
 
 MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
+SPECTRA = ("self-affine", "file", "psd")
 FIELDS = ("pressure", "gap", "displacement", "contact")
 SOLVERS = ("snes", "pk")
 
@@ -116,6 +117,17 @@ def _number_list(d, key, path, *, lo=None, lo_open=False, integer=False, default
     return out
 
 
+def _columns(d, path, names):
+    """``columns`` of a table file: None (the file has exactly these columns) or a list naming one
+    column per entry of ``names`` by 0-based index or header name (checked against the file later)."""
+    v = d.get("columns")
+    if v is not None and (not isinstance(v, list) or len(v) != len(names)
+                          or not all(isinstance(c, (int, str)) and not isinstance(c, bool) for c in v)):
+        raise InputError(f"{path}.columns", f"must list {len(names)} columns ({', '.join(names)}): 0-based "
+                                            f"indices or header names, got {v!r}")
+    return v
+
+
 def _path(d, key, path, base, must_exist=True):
     name = f"{path}.{key}"
     v = d.get(key)
@@ -132,22 +144,14 @@ def _path(d, key, path, base, must_exist=True):
 def _surface(job, base):
     s = _section(job, "surface")
     p = "surface"
-    spectrum = _choice(s, "spectrum", p, ("self-affine", "file"), default="self-affine")
+    spectrum = _choice(s, "spectrum", p, SPECTRA, default="self-affine")
     common = {"spectrum", "null_band", "seeds", "amplitudes"}
     out = {"spectrum": spectrum}
     out["amplitudes"] = _choice(s, "amplitudes", p, ("fixed", "gaussian"), default="fixed")
     if spectrum == "file":
-        _unknown(s, p, common | {"file", "length", "dataset"})
-        out["file"] = _path(s, "file", p, base)
-        if not out["file"].endswith((".npy", ".h5", ".hdf5")):
-            raise InputError(f"{p}.file", "must be a .npy or .h5 file of N x N heights in m")
-        out["length"] = _number(s, "length", p, lo=0, lo_open=True)
-        out["dataset"] = s.get("dataset")
-        if out["dataset"] is not None and not isinstance(out["dataset"], str):
-            raise InputError(f"{p}.dataset", "must be an HDF5 dataset name")
-        out["seeds"] = [0]
-        out["null_band"] = None
-        return out
+        return _surface_file(s, p, base, common, out)
+    if spectrum == "psd":
+        return _surface_psd(job, s, p, base, common, out)
     _unknown(s, p, common | {"q0", "qr", "q1", "hurst", "C0", "hrms"})
     q0 = out["q0"] = _number(s, "q0", p, lo=0, lo_open=True)
     qr = out["qr"] = _number(s, "qr", p, default=q0, lo=0, lo_open=True)
@@ -179,13 +183,84 @@ def _surface(job, base):
     return out
 
 
+def _surface_file(s, p, base, common, out):
+    """``spectrum: file``: heights from a .npy / .h5 file (raw, periodic, ``length`` given) or an
+    instrument scan (SurfaceTopography; its size from the file, see vecontact.io.topography)."""
+    from vecontact.io.topography import is_instrument_file, read_topography
+    _unknown(s, p, common | {"file", "length", "dataset"})
+    out["file"] = _path(s, "file", p, base)
+    out["dataset"] = s.get("dataset")
+    if out["dataset"] is not None and not isinstance(out["dataset"], str):
+        raise InputError(f"{p}.dataset", "must be an HDF5 dataset name or the channel of an instrument file")
+    if is_instrument_file(out["file"]):
+        if "length" in s:
+            raise InputError(f"{p}.length", "an instrument file states its own size; length is for "
+                                            ".npy and .h5 height files")
+        _, out["length"], out["source"] = read_topography(out["file"], out["dataset"], key=f"{p}.file")
+    else:
+        out["length"] = _number(s, "length", p, lo=0, lo_open=True)
+    out["seeds"] = [0]
+    out["null_band"] = None
+    return out
+
+
+#: Largest grid (points per side) a job on a measured spectrum may ask the solver for.
+MAX_PSD_GRID = 16384
+
+
+def fft_size(n_min):
+    """The smallest N >= n_min of the form 2^a, 3 2^a or 5 2^a (a >= 1): even, a fast FFT size,
+    and halvable for the solver's coarse grids."""
+    best = None
+    for m in (1, 3, 5):
+        n = 2 * m
+        while n < n_min:
+            n *= 2
+        best = n if best is None else min(best, n)
+    return best
+
+
+def _surface_psd(job, s, p, base, common, out):
+    """``spectrum: psd``: a measured C(q) table (vecontact.io.psd). The system is a square of side
+    ``length`` (default 2 pi / q_min of the table), q0 = 2 pi / length; ``q1`` (default the table's
+    q_max) cuts the spectrum; the grid resolves null_band q1: N = fft_size(2 null_band q1 / q0)."""
+    from vecontact.io.psd import read_psd
+    _unknown(s, p, common | {"file", "dimension", "columns", "length", "q1"})
+    out["file"] = _path(s, "file", p, base)
+    out["dimension"] = _number(s, "dimension", p, default=2, integer=True, lo=1, hi=2)
+    out["columns"] = cols = _columns(s, p, ("q", "C"))
+    psd = read_psd(out["file"], out["dimension"], key=f"{p}.file", columns=cols)
+    out["sha256"] = _file_hash(out["file"])
+    length = _number(s, "length", p, required=False, lo=0, lo_open=True)
+    out["length"] = L = float(length) if length is not None else 2.0 * math.pi / psd.q_min
+    q0 = out["q0"] = 2.0 * math.pi / L
+    q1 = out["q1"] = sorted(_number_list(s, "q1", p, lo=0, lo_open=True, default=[psd.q_max]))
+    lo = max(q0, psd.q_min)
+    for v in q1:
+        if not lo < v <= psd.q_max * (1 + 1e-12):
+            raise InputError(f"{p}.q1", f"must lie in ({lo:.6g}, {psd.q_max:.6g}] 1/m (the table's q range "
+                                        f"above 2 pi / length), got {v:g}")
+    out["null_band"] = nb = _number(s, "null_band", p, default=8, lo=1)
+    out["seeds"] = _seeds(s, p, q1)
+    out["table"] = {"rows": int(psd.q.size), "q_min": psd.q_min, "q_max": psd.q_max, "hrms": psd.hrms()}
+    out["grid"] = {}
+    numerics = job.get("numerics") if isinstance(job.get("numerics"), dict) else {}
+    for v in q1:
+        n = fft_size(2.0 * nb * v / q0 * (1 - 1e-12))
+        if numerics.get("enabled") is True and n > MAX_PSD_GRID:
+            raise InputError(f"{p}.q1", f"the solver would need a {n} x {n} grid for q1 = {v:g} 1/m with "
+                                        f"length {L:.4g} m (N > {MAX_PSD_GRID}): give a smaller q1 or length")
+        out["grid"][repr(float(v))] = n
+    return out
+
+
 def _seeds(s, p, q1):
     """``seeds``: a list (every q1), or a mapping {q1: list, ..., other: list} so that the small
     systems get more realisations than the large ones. Resolved to the list, or to
     {repr(q1): list} for every q1 (read it with :func:`seeds_for`)."""
     v = s.get("seeds", [1])
     if not isinstance(v, dict):
-        return _number_list(s, "seeds", p, lo=0, integer=True)
+        return _number_list(s, "seeds", p, lo=0, integer=True, default=[1])
     name = f"{p}.seeds"
     other = _number_list(v, "other", name, lo=0, integer=True) if "other" in v else None
     given = {}
@@ -248,8 +323,13 @@ def _material(job, base):
             tau = _number({"tau": t[1]}, "tau", f"{p}.terms[{i}]", lo=0, lo_open=True)
             out["terms"].append([de, tau])
     else:  # table
-        keys |= {"file", "wlf"}
+        keys |= {"file", "wlf", "frequency_unit", "modulus_unit", "columns", "vertical_shift"}
         out["file"] = _path(m, "file", p, base)
+        from vecontact.physics.modulus import FREQUENCY_UNITS, MODULUS_UNITS
+        out["frequency_unit"] = _choice(m, "frequency_unit", p, tuple(FREQUENCY_UNITS), default="rad/s")
+        out["modulus_unit"] = _choice(m, "modulus_unit", p, tuple(MODULUS_UNITS), default="Pa")
+        out["columns"] = _columns(m, p, ("frequency", "E'", "E''"))
+        out["vertical_shift"] = _number(m, "vertical_shift", p, default=1.0, lo=0, lo_open=True)
         wlf = m.get("wlf")
         if wlf is not None:
             if not isinstance(wlf, dict):
@@ -264,8 +344,8 @@ def _material(job, base):
     _unknown(m, p, keys)
     if model == "table":
         # Read the table now: a bad file is an input error, found before any work.
-        from vecontact.physics.modulus import Table
-        Table.from_file(out["file"], out["nu"], out["wlf"])
+        from vecontact.physics.modulus import make_modulus
+        make_modulus(out)
     return out
 
 

@@ -11,26 +11,41 @@ from vecontact import cases as sweep
 from vecontact.errors import InputError, ResultsFileError
 from vecontact.io.results import ResultsFile
 from vecontact.job import physics_hash, to_yaml
+from vecontact.physics.modulus import make_modulus, warn_coverage
 from vecontact.physics.spectrum import Tabulated
 
 
-def spectra(job, comm):
-    """q1 -> spectrum. A surface from a file brings its own radially averaged PSD."""
+def spectra(job, comm, warn=True):
+    """q1 (1/m) -> roughness spectrum C(q) (m^4) of the job's cases, the same on every rank.
+
+    self-affine: the analytic spectrum at each q1; psd: the measured table restricted to the band
+    [max(q_min, 2 pi / length), q1] that the system holds (theory and numerics see the same band);
+    file: the radially averaged PSD of the surface (one q1: its largest bin). With ``warn``, warns
+    (:class:`InputWarning`, rank 0) when a tabulated modulus does not cover the frequencies q v.
+    """
     s = job["surface"]
-    if s["spectrum"] != "file":
-        return {float(q1): sweep.spectrum_for(job, q1) for q1 in s["q1"]}
-    from vecontact.core.surface import load
-    from vecontact.io.surfaces import file_grid_size
-    from vecontact.core.pfft import SlabFFT
-    n = file_grid_size(s["file"], s.get("dataset"))
-    fft = SlabFFT(comm, n)
-    h = load(fft, s["file"], s.get("dataset"))
-    q, C = fft.radial_psd(h, s["length"])
-    keep = C > 0
-    if keep.sum() < 2:
-        raise InputError("surface.file", "the surface is flat: its power spectrum is zero")
-    psd = Tabulated(q[keep], C[keep])
-    return {float(psd.q_max): psd}
+    if s["spectrum"] == "self-affine":
+        out = {float(q1): sweep.spectrum_for(job, q1) for q1 in s["q1"]}
+    elif s["spectrum"] == "psd":
+        from vecontact.io.psd import read_psd
+        table = read_psd(s["file"], s["dimension"], columns=s.get("columns"))
+        out = {float(q1): table.band(s["q0"], q1) for q1 in s["q1"]}
+    else:
+        from vecontact.core.surface import load
+        from vecontact.io.surfaces import file_grid_size
+        from vecontact.core.pfft import SlabFFT
+        n = file_grid_size(s["file"], s.get("dataset"))
+        fft = SlabFFT(comm, n)
+        h = load(fft, s["file"], s.get("dataset"))
+        try:
+            psd = Tabulated.from_surface(fft, h, s["length"])
+        except ValueError as exc:
+            raise InputError("surface.file", str(exc)) from None
+        out = {float(psd.q_max): psd}
+    if warn and comm.rank == 0:
+        warn_coverage(make_modulus(job["material"]), min(p.q_min for p in out.values()),
+                      max(p.q_max for p in out.values()), job["sweep"]["velocity"])
+    return out
 
 
 def open_results(job, comm):

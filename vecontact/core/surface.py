@@ -192,7 +192,9 @@ def load(fft, path, dataset=None):
 
     ``.npy`` is memory-mapped (the full array is never loaded on any rank); for HDF5 ``dataset`` names
     the dataset, otherwise the file must contain exactly one 2-D dataset.  The array must be N x N
-    (N = fft.N), real and finite.  Problems raise ``InputError("surface.file", ...)`` on all ranks.
+    (N = fft.N), real and finite.  Any other file is an instrument scan, read and made periodic by
+    :func:`vecontact.io.topography.read_topography` (``dataset``: its channel).  Problems raise
+    ``InputError("surface.file", ...)`` on all ranks.
     """
     path = os.fspath(path)
 
@@ -204,7 +206,10 @@ def load(fft, path, dataset=None):
             return _read_npy(fft, path)
         if ext in (".h5", ".hdf5", ".he5"):
             return _read_h5(fft, path, dataset)
-        raise InputError(_KEY, f"{path}: unknown surface file type {ext!r} (use .npy or .h5)")
+        from vecontact.io.topography import read_topography
+        full = read_topography(path, dataset)[0]
+        _check_array_meta(path, full.shape, full.dtype, fft.N)
+        return np.ascontiguousarray(full[fft.row_start:fft.row_stop])
 
     h = _agree(fft.comm, read)
 

@@ -14,7 +14,11 @@ from vecontact.io.results import atomic_h5
 
 
 def file_grid_size(path, dataset=None):
-    """N of an N x N height file (.npy or .h5), read from its header only."""
+    """N of an N x N height file (.npy or .h5: read from its header only; an instrument scan: N of
+    the periodic surface made from it, see :mod:`vecontact.io.topography`)."""
+    from vecontact.io.topography import is_instrument_file, read_topography
+    if is_instrument_file(path):
+        return int(read_topography(path, dataset)[0].shape[0])
     try:
         if path.endswith(".npy"):
             shape = np.load(path, mmap_mode="r").shape
@@ -53,8 +57,8 @@ def write_rows(comm, dset, row_start, local):
 
 def write_job_surfaces(job, path, comm):
     """Generate every (q1, seed) surface of a job and write them to ``path`` (atomically)."""
-    from vecontact.cases import spectrum_for
     from vecontact.core.pfft import SlabFFT
+    from vecontact.runner import spectra
     from vecontact.core.surface import generate, statistics
     from vecontact.job import grid_size, seeds_for, to_yaml
     from vecontact import __version__
@@ -65,11 +69,12 @@ def write_job_surfaces(job, path, comm):
     if not path.endswith((".h5", ".hdf5")):
         raise InputError("output", f"surfaces are written to an .h5 file, got {path!r}")
     L = 2 * np.pi / s["q0"]
+    psds = spectra(job, comm)
     items = []
     for q1 in s["q1"]:
         n = grid_size(job, q1)
         fft = SlabFFT(comm, n)
-        psd = spectrum_for(job, q1)
+        psd = psds[float(q1)]
         for seed in seeds_for(s, q1):
             h = generate(fft, L, psd, seed, amplitudes=s["amplitudes"])
             items.append((q1, seed, n, fft, h, statistics(fft, h, L), psd))
@@ -80,7 +85,9 @@ def write_job_surfaces(job, path, comm):
         f.attrs["units"] = "heights: m; L: m; q0, q1: 1/m"
         for q1, seed, n, fft, h, st, psd in items:
             d = f.create_dataset(f"q1_{q1:.6e}_seed_{seed}", shape=(n, n), dtype="f8")
-            d.attrs.update({"L": L, "q0": s["q0"], "qr": s["qr"], "q1": q1, "seed": seed, "N": n,
+            if "qr" in s:
+                d.attrs["qr"] = s["qr"]
+            d.attrs.update({"L": L, "q0": s["q0"], "q1": q1, "seed": seed, "N": n,
                             "hrms": st["hrms"], "slope_rms": st["slope_rms"],
                             "hrms_spectrum": psd.hrms(), "slope_rms_spectrum": np.sqrt(psd.slope2())})
             write_rows(comm, d, fft.row_start, h)

@@ -14,12 +14,22 @@ Models: :class:`Elastic`, :class:`SLS`, :class:`Prony` (generalised Maxwell),
 """
 import math
 import os
+import warnings
 
 import numpy as np
 
-from vecontact.errors import InputError
+from vecontact.errors import InputError, InputWarning
+from vecontact.io.tables import read_columns
 
-__all__ = ["Elastic", "SLS", "Prony", "HavriliakNegami", "Table", "make_modulus", "wlf_shift"]
+__all__ = ["Elastic", "SLS", "Prony", "HavriliakNegami", "Table", "make_modulus", "wlf_shift",
+           "coverage", "warn_coverage"]
+
+#: Frequency units of a master-curve table: factor to angular frequency (rad/s).
+FREQUENCY_UNITS = {"rad/s": 1.0, "Hz": 2.0 * math.pi}
+#: Modulus units of a master-curve table: factor to Pa.
+MODULUS_UNITS = {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6, "GPa": 1e9}
+#: Storage moduli (Pa) a solid's master curve can have; outside, the table's unit is wrong.
+PLAUSIBLE_STORAGE = (1e3, 1e12)
 
 
 class _Modulus:
@@ -156,9 +166,12 @@ class Table(_Modulus):
       E''(omega_min) omega / omega_min below and E''(omega_max) omega_max / omega above.
     * ``wlf`` (dict C1, C2, T_ref, T): E(omega, T) = E(aT omega, T_ref) with aT from
       :func:`wlf_shift`. E0 and Einf are unchanged by the shift.
+    * ``vertical_shift`` bT > 0 (dimensionless, default 1): E(omega, T) = bT E(aT omega, T_ref), the
+      vertical (modulus) shift of time-temperature superposition, often T rho / (T_ref rho_ref);
+      it scales E0 and Einf too.
     """
 
-    def __init__(self, omega, E_storage, E_loss, nu=0.5, wlf=None):
+    def __init__(self, omega, E_storage, E_loss, nu=0.5, wlf=None, vertical_shift=1.0):
         self.omega = np.asarray(omega, dtype=float)
         self.E_storage = np.asarray(E_storage, dtype=float)
         self.E_loss = np.asarray(E_loss, dtype=float)
@@ -168,26 +181,49 @@ class Table(_Modulus):
         self.nu = float(nu)
         self.wlf = dict(wlf) if wlf else None
         self.aT = wlf_shift(self.wlf)
-        self.E0 = float(self.E_storage[0])
-        self.Einf = float(self.E_storage[-1])
+        self.bT = float(vertical_shift)
+        if not (self.bT > 0 and math.isfinite(self.bT)):
+            raise ValueError(f"vertical_shift must be a positive number, got {vertical_shift!r}")
+        self.E0 = self.bT * float(self.E_storage[0])
+        self.Einf = self.bT * float(self.E_storage[-1])
         self._log_omega = np.log(self.omega)
         self._log_storage = np.log(self.E_storage)
         self._log_loss = np.log(self.E_loss)
         self.source = None
 
     @classmethod
-    def from_file(cls, path, nu=0.5, wlf=None):
-        """Read a text file with 3 columns: omega (rad/s), E' (Pa), E'' (Pa).
+    def from_file(cls, path, nu=0.5, wlf=None, *, frequency_unit="rad/s", modulus_unit="Pa",
+                  columns=None, vertical_shift=1.0):
+        """Read a master curve from a text or CSV table: frequency, E', E'' (one row per frequency).
 
-        Columns are separated by whitespace and/or commas; '#' starts a comment. Raises
-        ``InputError("material.file", ...)`` for an unreadable file, a malformed line, fewer than two
-        rows, non-positive values or frequencies not strictly increasing.
+        The table format is that of :func:`vecontact.io.tables.read_columns` (comma, semicolon, tab
+        or space separated; '#' comments; an optional header line). ``columns``: None (exactly three
+        columns: frequency, E', E'') or three 0-based indices or header names picking them from a
+        wider DMA export. ``frequency_unit``: "rad/s" (angular frequency omega) or "Hz" (f, with
+        omega = 2 pi f); ``modulus_unit``: Pa, kPa, MPa or GPa. ``wlf``, ``vertical_shift``: see
+        the class. Raises ``InputError("material.file", ...)`` for an unreadable file, a malformed
+        line, fewer than two rows, non-positive values, frequencies not strictly increasing, or
+        storage moduli outside 1 kPa .. 1 TPa after the unit conversion (a unit mistake).
         """
-        data = _read_table_file(path)
-        problem = _table_problem(data[:, 0], data[:, 1], data[:, 2])
+        if frequency_unit not in FREQUENCY_UNITS:
+            raise InputError("material.frequency_unit", f"must be one of {', '.join(FREQUENCY_UNITS)}, "
+                                                        f"got {frequency_unit!r}")
+        if modulus_unit not in MODULUS_UNITS:
+            raise InputError("material.modulus_unit", f"must be one of {', '.join(MODULUS_UNITS)}, "
+                                                      f"got {modulus_unit!r}")
+        data = read_columns(path, "material.file", ("frequency", "E'", "E''"), columns)
+        omega = data[:, 0] * FREQUENCY_UNITS[frequency_unit]
+        storage = data[:, 1] * MODULUS_UNITS[modulus_unit]
+        loss = data[:, 2] * MODULUS_UNITS[modulus_unit]
+        problem = _table_problem(omega, storage, loss)
         if problem:
             raise InputError("material.file", f"{path}: {problem}")
-        table = cls(data[:, 0], data[:, 1], data[:, 2], nu=nu, wlf=wlf)
+        lo, hi = PLAUSIBLE_STORAGE
+        if storage.min() < lo or storage.max() > hi:
+            raise InputError("material.file", f"{path}: E' = {storage.min():.3g} .. {storage.max():.3g} Pa is "
+                                              f"not a solid's modulus ({lo:g} .. {hi:g} Pa): set "
+                                              f"material.modulus_unit ({', '.join(MODULUS_UNITS)})")
+        table = cls(omega, storage, loss, nu=nu, wlf=wlf, vertical_shift=vertical_shift)
         table.source = os.fspath(path)
         return table
 
@@ -196,14 +232,15 @@ class Table(_Modulus):
         w_min, w_max = self.omega[0], self.omega[-1]
         log_w = np.log(np.clip(w, w_min, w_max))
         storage = np.exp(np.interp(log_w, self._log_omega, self._log_storage))
-        storage = np.where(w <= w_min, self.E0, np.where(w >= w_max, self.Einf, storage))
+        storage = np.where(w <= w_min, self.E_storage[0], np.where(w >= w_max, self.E_storage[-1], storage))
         loss = np.exp(np.interp(log_w, self._log_omega, self._log_loss))
         tail = np.where(w < w_min, w / w_min, w_max / np.maximum(w, w_max))   # 1 inside the table
-        return storage + 1j * loss * tail
+        return self.bT * (storage + 1j * loss * tail)
 
     def describe(self):
         src = f" from {self.source}" if self.source else ""
         shift = f", WLF aT = {self.aT:.4g}" if self.wlf else ""
+        shift += f", vertical shift bT = {self.bT:.4g}" if self.bT != 1.0 else ""
         return (f"table{src}: {len(self.omega)} points, "
                 f"omega {self.omega[0]:.3g}..{self.omega[-1]:.3g} rad/s, "
                 f"E0 = {self.E0:.4g} Pa, Einf = {self.Einf:.4g} Pa{shift}, nu = {self.nu:g}")
@@ -224,36 +261,13 @@ def _table_problem(omega, storage, loss):
     return None
 
 
-def _read_table_file(path):
-    """Parse a 3-column numeric text file into an (n, 3) float array; InputError on failure."""
-    try:
-        with open(path, "r", encoding="utf-8") as fh:
-            lines = fh.readlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError("material.file", f"cannot read {path}: {exc}") from None
-    rows = []
-    for lineno, line in enumerate(lines, start=1):
-        fields = line.split("#", 1)[0].replace(",", " ").split()
-        if not fields:
-            continue
-        if len(fields) != 3:
-            raise InputError("material.file", f"{path} line {lineno}: expected 3 columns (omega, E', E''), "
-                                              f"got {len(fields)}")
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            raise InputError("material.file", f"{path} line {lineno}: not a number") from None
-    if not rows:
-        raise InputError("material.file", f"{path}: no data rows")
-    return np.array(rows, dtype=float)
-
-
 def make_modulus(material):
     """Build a modulus model from a (validated) job ``material`` dict.
 
     Keys: ``model`` in {elastic, sls, prony, havriliak-negami, table}; ``E0`` (Pa; the modulus of an
     elastic solid), ``Einf`` (Pa), ``alpha``, ``beta``, ``tau`` (s), ``terms`` ([[dE, tau], ...]),
-    ``file`` (table path), ``wlf`` (dict, table only), ``nu`` (default 0.5).
+    ``file`` (table path), ``wlf`` (dict, table only), ``frequency_unit``, ``modulus_unit``,
+    ``columns``, ``vertical_shift`` (table only, see :meth:`Table.from_file`), ``nu`` (default 0.5).
     """
     model = str(material["model"]).lower()
     nu = material.get("nu", 0.5)
@@ -267,5 +281,50 @@ def make_modulus(material):
         return HavriliakNegami(material["E0"], material["Einf"], material["alpha"], material["beta"],
                                material["tau"], nu)
     if model == "table":
-        return Table.from_file(material["file"], nu, material.get("wlf"))
+        return Table.from_file(material["file"], nu, material.get("wlf"),
+                               frequency_unit=material.get("frequency_unit", "rad/s"),
+                               modulus_unit=material.get("modulus_unit", "Pa"),
+                               columns=material.get("columns"),
+                               vertical_shift=material.get("vertical_shift", 1.0))
     raise InputError("material.model", f"unknown model {material['model']!r}")
+
+
+def coverage(modulus, q_min, q_max, velocities):
+    """Where the frequencies a job needs leave a tabulated master curve: a one-line message, or None.
+
+    The roughness wavevectors q in [q_min, q_max] (1/m) are felt at omega = q v cos(phi) <= q v
+    (rad/s) for each sliding velocity v (m/s). Frequencies near 0 (phi -> pi/2) always fall below a
+    table and are harmless (E -> E0 there); the message reports, per velocity, the wavevectors
+    whose main frequency q v lies outside the table (after the WLF shift) and how E is extrapolated
+    there. Analytic models cover every frequency: None.
+    """
+    if not isinstance(modulus, Table):
+        return None
+    lo, hi = modulus.omega[0] / modulus.aT, modulus.omega[-1] / modulus.aT
+    parts = []
+    for v in sorted(float(v) for v in np.atleast_1d(velocities)):
+        if v <= 0:
+            continue
+        outside = []
+        if q_min * v < lo:
+            outside.append(f"q < {min(lo / v, q_max):.3g} 1/m below omega_min")
+        if q_max * v > hi:
+            outside.append(f"q > {max(hi / v, q_min):.3g} 1/m above omega_max")
+        if outside:
+            parts.append(f"v = {v:g} m/s: " + " and ".join(outside))
+    if not parts:
+        return None
+    shift = f" at the job's temperature (WLF aT = {modulus.aT:.3g})" if modulus.wlf else ""
+    return (f"the master curve covers omega = {lo:.3g} .. {hi:.3g} rad/s{shift}, the roughness "
+            f"(q = {q_min:.3g} .. {q_max:.3g} 1/m) needs omega = q v: {'; '.join(parts)}. There E is "
+            f"extrapolated: E' held at E'(omega_min) below and E'(omega_max) above, E'' falling as "
+            f"omega / omega_min below and omega_max / omega above")
+
+
+def warn_coverage(modulus, q_min, q_max, velocities, key="material.file", stacklevel=2):
+    """Warn (:class:`InputWarning`, message under ``key``) when a tabulated modulus does not cover
+    the frequencies q v of wavevectors q in [q_min, q_max] (1/m); see :func:`coverage`.
+    ``stacklevel`` as for :func:`warnings.warn`, counted from the caller of this function."""
+    text = coverage(modulus, q_min, q_max, velocities)
+    if text:
+        warnings.warn(f"{key}: {text}", InputWarning, stacklevel=stacklevel + 1)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-__all__ = ["SelfAffine", "Tabulated"]
+__all__ = ["SelfAffine", "Tabulated", "line_psd", "isotropic_from_line", "LINE_TAIL_OCTAVES"]
 
 
 def _power_integral(a, b, e):
@@ -131,6 +131,28 @@ class Tabulated(_Spectrum):
         # Local power-law exponents C ~ q^slope on each interval.
         self._slopes = np.diff(self._log_C) / np.diff(self._log_q)
 
+    @classmethod
+    def from_surface(cls, fft, h, L):
+        """The radially averaged PSD of the surface ``h`` (local rows of a :class:`SlabFFT` grid,
+        heights in m, period L in m): unit-width annuli in 2 pi / L, empty or zero bins dropped
+        (``SlabFFT.radial_psd``). Same result on every rank. ValueError if the surface is flat."""
+        q, C = fft.radial_psd(h, L)
+        keep = C > 0
+        if keep.sum() < 2:
+            raise ValueError("the surface is flat: its power spectrum is zero")
+        return cls(q[keep], C[keep])
+
+    def band(self, lo, hi):
+        """The spectrum restricted to [lo, hi] (1/m): C = 0 outside; the end points are
+        interpolated (log-log) when they fall between samples. ValueError if the band misses the
+        table or is narrower than a point."""
+        lo, hi = max(float(lo), self.q_min), min(float(hi), self.q_max)
+        if not lo < hi:
+            raise ValueError(f"the band [{lo:g}, {hi:g}] 1/m leaves the table ({self.q_min:g} .. {self.q_max:g})")
+        inner = (self.q > lo) & (self.q < hi)
+        q = np.concatenate([[lo], self.q[inner], [hi]])
+        return Tabulated(q, self(q))
+
     @property
     def q_min(self):
         return float(self.q[0])
@@ -146,7 +168,8 @@ class Tabulated(_Spectrum):
 
     def __call__(self, q):
         q = np.asarray(q, dtype=float)
-        inside = (q >= self.q[0]) & (q <= self.q[-1])
+        # the same slack at the ends as SelfAffine: lattice wavevectors on an end circle stay in
+        inside = (q >= self.q[0] * (1 - EDGE_RTOL)) & (q <= self.q[-1] * (1 + EDGE_RTOL))
         log_q = np.log(np.clip(q, self.q[0], self.q[-1]))
         return np.where(inside, np.exp(np.interp(log_q, self._log_q, self._log_C)), 0.0)
 
@@ -164,3 +187,92 @@ class Tabulated(_Spectrum):
     def describe(self):
         return (f"tabulated PSD: {self.q.size} samples, q {self.q[0]:.4g}..{self.q[-1]:.4g} 1/m, "
                 f"h_rms = {self.hrms() * 1e9:.4g} nm, rms slope = {math.sqrt(self.slope2()):.4g}")
+
+
+# --------------------------------------------------------------------------------------------
+# 1-D line-scan spectra (docs/inputs.md, "1-D line-scan spectra")
+#
+# C1D(q) = (1/2 pi) Int dx <h(x) h(0)> exp(-i q x) (m^3), two-sided: h_rms^2 = Int_{-inf}^{inf} C1D dq.
+# For an isotropic surface with Persson's 2-D C(q), C1D(qx) = Int dqy C(sqrt(qx^2 + qy^2)), and
+# the Abel inversion gives C(q) = -(1/pi) Int_q^inf dk C1D'(k) / sqrt(k^2 - q^2).
+# Both integrals are done in t with k = q cosh t (dk / sqrt(k^2 - q^2) = dt), which removes the
+# inverse square-root singularity at k = q; Gauss-Legendre panels never straddle a kink.
+
+#: Gauss-Legendre nodes per panel and largest panel width in t of the line-spectrum integrals.
+_LINE_ORDER = 16
+_LINE_PANEL = 0.25
+#: Octaves at the large-q end of a line-scan table over which the tail exponent is fitted.
+LINE_TAIL_OCTAVES = 1.0
+
+
+def _t_panels(edges):
+    """Gauss-Legendre nodes and weights in t over consecutive intervals [edges[i], edges[i+1]]
+    (1-D array, non-decreasing), each split into panels of width <= _LINE_PANEL. Returns (t, w)."""
+    x, w = np.polynomial.legendre.leggauss(_LINE_ORDER)
+    width = np.diff(edges)
+    keep = width > 0
+    starts, width = edges[:-1][keep], width[keep]
+    n = np.maximum(1, np.ceil(width / _LINE_PANEL)).astype(int)
+    half = np.repeat(0.5 * width / n, n)                              # half-width of each panel
+    panel = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)       # index within its interval
+    a = np.repeat(starts, n) + 2.0 * half * panel
+    return (a[:, None] + half[:, None] * (x + 1.0)).ravel(), (half[:, None] * w).ravel()
+
+
+def line_psd(spectrum, q):
+    """The 1-D line-scan PSD C1D(q) (m^3) of an isotropic surface with 2-D spectrum ``spectrum``
+    (Persson's convention, m^4), at wavevectors q > 0 (1/m, array):
+
+    C1D(q) = Int dqy C(sqrt(q^2 + qy^2)) = 2 Int_{max(q, q_min)}^{q_max} C(k) k / sqrt(k^2 - q^2) dk.
+    """
+    q = np.atleast_1d(np.asarray(q, dtype=float))
+    if np.any(q <= 0):
+        raise ValueError("line_psd needs wavevectors q > 0")
+    kinks = np.asarray(spectrum.breakpoints, dtype=float)
+    out = np.empty(q.shape)
+    for i, qi in enumerate(q.ravel()):
+        inside = kinks[kinks > qi]
+        edges = np.arccosh(np.concatenate([[max(qi, kinks[0])], inside]) / qi)
+        t, w = _t_panels(edges)
+        k = qi * np.cosh(t)
+        out.flat[i] = 2.0 * np.sum(w * spectrum(k) * k)
+    return out
+
+
+def isotropic_from_line(q, C1D):
+    """Persson's 2-D C(q) (m^4) at the samples q (1/m) from a measured line-scan PSD (q, C1D) (m^3).
+
+    C1D is interpolated as a power law between samples (as :class:`Tabulated` does) and continued
+    beyond the last sample as a power law whose exponent is fitted (least squares in log-log) to
+    the samples in the last ``LINE_TAIL_OCTAVES`` octave(s); the Abel inversion
+    C(q) = -(1/pi) Int_q^inf C1D'(k) / sqrt(k^2 - q^2) dk is then exact for that model up to the
+    quadrature (16-point Gauss-Legendre panels of width <= 0.25 in t = arccosh(k / q); the tail in
+    closed form, an incomplete beta function). Returns C at every sample (it can come out <= 0 where
+    the data rise with q; the caller decides). ValueError if the fitted tail does not decay.
+    """
+    from scipy.special import beta as beta_fn, betainc
+    q = np.asarray(q, dtype=float)
+    C1D = np.asarray(C1D, dtype=float)
+    line = Tabulated(q, C1D)                      # validates: increasing q, positive C
+    slopes = line._slopes                         # C1D ~ k^s on each interval
+    tail = q >= q[-1] * 2.0 ** -LINE_TAIL_OCTAVES
+    if tail.sum() < 2:
+        tail[-2:] = True
+    s_tail = float(np.polyfit(np.log(q[tail]), np.log(C1D[tail]), 1)[0])
+    if s_tail >= 0:
+        raise ValueError(f"the line-scan PSD does not decay at its large-q end (fitted exponent "
+                         f"{s_tail:.3g} over the last octave): its tail cannot be continued")
+    out = np.empty(q.shape)
+    for j, qj in enumerate(q):
+        edges = np.arccosh(q[j:] / qj)            # sample k_i = q cosh t_i, i >= j
+        t, w = _t_panels(edges)
+        k = qj * np.cosh(t)
+        piece = np.minimum(np.searchsorted(q, k, side="right") - 1, q.size - 2)
+        body = np.sum(w * slopes[piece] * line(k) / k)
+        # tail: Int_{q_max}^inf s C_end (k/q_max)^s / k / sqrt(k^2 - q^2) dk
+        #     = s C_end (q / q_max)^s / q * (1/2) B(x^2; (1 - s)/2, 1/2),  x = q / q_max
+        a = 0.5 * (1.0 - s_tail)
+        x2 = (qj / q[-1]) ** 2
+        tail_int = s_tail * C1D[-1] * (qj / q[-1]) ** s_tail / qj * 0.5 * betainc(a, 0.5, x2) * beta_fn(a, 0.5)
+        out[j] = -(body + tail_int) / math.pi
+    return out
