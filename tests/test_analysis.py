@@ -116,7 +116,8 @@ def test_interpolation_and_log_slope():
 
 def test_theory_error_and_bands():
     pts = np.zeros(3, dtype=[(k, "f8") for k in ("mu", "mu_se", "theory_mu", "area")])
-    pts["mu"], pts["mu_se"], pts["theory_mu"], pts["area"] = [0.02, 0.04, 0.05], [0.001, np.nan, 0], [0.03, 0.03, 0.05], [0.01, 0.05, 0.5]
+    pts["mu"], pts["mu_se"], pts["theory_mu"] = [0.02, 0.04, 0.05], [0.001, np.nan, 0], [0.03, 0.03, 0.05]
+    pts["area"] = [0.01, 0.05, 0.5]
     err, se = theory_error(pts, "mu")
     assert err == pytest.approx([0.5, -0.25, 0.0], abs=1e-15)
     assert se[0] == pytest.approx(1.5 * 0.001 / 0.02, rel=1e-14) and math.isnan(se[1])

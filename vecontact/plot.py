@@ -26,8 +26,8 @@ from vecontact.analysis.ensemble import converged_rows, select
 from vecontact.analysis.paper import abscissa, collapse, master_slope
 from vecontact.analysis.study import load_study
 from vecontact.physics.theory import erf
-from vecontact.plot_style import (LINESTYLES, draw_points, marker_handles, markers, palette, pyplot, save,
-                                  seeds_note, velocity_handles)
+from vecontact.plot_style import (LINESTYLES, draw_points, friction_panel, marker_handles, markers, palette,
+                                  pyplot, save, seeds_note, velocity_handles)
 
 #: Velocities of Fig. 4 (the paper's); when the study has not both, its two fastest.
 FIG4_VELOCITIES = (1.0, 10.0)
@@ -68,34 +68,19 @@ def spectrum_figure(study, outdir):
     return save(fig, outdir, "fig1_spectrum.png")
 
 
-def friction_panel(ax, study, q1, colors):
-    """mu / <(grad h)^2> against A/A0 at one q1: theory lines and seed-mean points, per velocity."""
-    th = study.theory(q1)
-    s2 = th.slope_rms ** 2
-    for k, v in enumerate(th.velocity):
-        ax.plot(th.curve_area[k], th.curve_mu[k] / s2, color=colors[v], lw=1)
-        p = select(study.points(), q1, v)
-        draw_points(ax, p["area"], p["mu"] / s2, yerr=p["mu_se"] / s2, xerr=p["area_se"], color=colors[v])
-    ax.set_xscale("log")
-    ax.set_xlabel("A/A$_0$")
-    ax.set_ylabel(r"$\mu / \langle(\nabla h)^2\rangle$")
-
-
 def friction_figure(study, outdir):
     plt = pyplot()
     have = study.q1_with_results()
     small = min(study.q1s)
     large = max(have) if have and max(have) > small else max(study.q1s)
     colors = palette(study.velocities)
+    titles = [f"(a) large system: q1 = {study.q1_label(large)}", f"(b) small system: q1 = {study.q1_label(small)}"]
+    if large in have and large != max(study.q1s):
+        titles[0] += f"\n(largest q1 with results; {study.q1_label(max(study.q1s))} not yet)"
     fig, axes = plt.subplots(1, 2, figsize=(9, 4))
-    for ax, q1, name in ((axes[0], large, "(a) large"), (axes[1], small, "(b) small")):
+    for k, (ax, q1) in enumerate(zip(axes, (large, small))):
         friction_panel(ax, study, q1, colors)
-        extra = ""
-        if q1 not in have:
-            extra = "\n(theory only: no converged cases yet)"
-        elif q1 != max(study.q1s) and name.startswith("(a)"):
-            extra = f"\n(largest q1 with results; {study.q1_label(max(study.q1s))} not yet)"
-        ax.set_title(f"{name} system: q1 = {study.q1_label(q1)}{extra}", fontsize=9)
+        ax.set_title(titles[k] + ("" if q1 in have else "\n(theory only: no converged cases yet)"), fontsize=9)
     axes[0].legend(handles=velocity_handles(colors), fontsize=7)
     fig.suptitle("Fig. 2: friction (lines: theory, points: exact numerics)", fontsize=10)
     return save(fig, outdir, "fig2_friction.png", seeds_note(study, study.points(), [large, small]))

@@ -11,8 +11,8 @@ import numpy as np
 from vecontact.analysis.beyond import (GAMMAS, MORPHOLOGY, MORPHOLOGY_AREAS, gamma_curves,
                                        morphology_at_areas, theory_error)
 from vecontact.analysis.ensemble import select
-from vecontact.plot_style import (LINESTYLES, draw_points, marker_handles, markers, palette, pyplot, save,
-                                  seeds_note, velocity_handles)
+from vecontact.plot_style import (LINESTYLES, draw_points, friction_panel, marker_handles, markers, palette,
+                                  pyplot, save, seeds_note, velocity_handles)
 
 
 def figures(study, outdir):
@@ -108,18 +108,8 @@ def gamma_figure(study, outdir):
     fig, axes = plt.subplots(1, len(q1s) + 1, figsize=(4.6 * len(q1s) + 2, 4.2),
                              gridspec_kw={"width_ratios": [1] * len(q1s) + [0.45]})
     for ax, q1 in zip(axes, q1s):
-        th = study.theory(q1)
-        s2 = th.slope_rms ** 2
-        for g, ls in zip(GAMMAS, LINESTYLES):
-            area, mu = gamma_curves(study, q1, g)
-            for k, v in enumerate(th.velocity):
-                ax.plot(area[k], mu[k] / s2, color=colors[v], ls=ls, lw=1)
-        for v in study.velocities:
-            p = select(study.points(), q1, v)
-            draw_points(ax, p["area"], p["mu"] / s2, yerr=p["mu_se"] / s2, xerr=p["area_se"], color=colors[v])
-        ax.set_xscale("log")
-        ax.set_xlabel("A/A$_0$")
-        ax.set_ylabel(r"$\mu / \langle(\nabla h)^2\rangle$")
+        curves = [gamma_curves(study, q1, g) + (ls,) for g, ls in zip(GAMMAS, LINESTYLES)]
+        friction_panel(ax, study, q1, colors, curves)
         ax.set_title(f"q1 = {study.q1_label(q1)}", fontsize=9)
         _no_results(ax, study)
     from matplotlib.lines import Line2D

@@ -10,7 +10,7 @@ import textwrap
 
 import numpy as np
 
-from vecontact.analysis.ensemble import seeds_summary
+from vecontact.analysis.ensemble import seeds_summary, select
 
 MARKERS = ("o", "s", "^", "D", "v", "P")
 LINESTYLES = ("-", "--", "-.", ":")
@@ -46,6 +46,22 @@ def draw_points(ax, x, y, yerr=None, xerr=None, color="k", marker="o", connect=T
     ax.errorbar(x, y, yerr=None if yerr is None else bar(yerr), xerr=None if xerr is None else bar(xerr),
                 fmt=marker, color=color, mfc="none", ms=4, lw=0.8, capsize=1.5, ls=":" if connect else "none",
                 label=label)
+
+
+def friction_panel(ax, study, q1, colors, curves=None):
+    """mu / <(grad h)^2> against A/A0 at one q1: theory lines and seed-mean points, per velocity.
+    ``curves``: [(area, mu, line style)] with area, mu of shape (V, J); default the file's theory, solid."""
+    th = study.theory(q1)
+    s2 = th.slope_rms ** 2
+    for area, mu, ls in curves or [(th.curve_area, th.curve_mu, "-")]:
+        for k, v in enumerate(th.velocity):
+            ax.plot(area[k], mu[k] / s2, color=colors[v], ls=ls, lw=1)
+    for v in th.velocity:
+        p = select(study.points(), q1, v)
+        draw_points(ax, p["area"], p["mu"] / s2, yerr=p["mu_se"] / s2, xerr=p["area_se"], color=colors[v])
+    ax.set_xscale("log")
+    ax.set_xlabel("A/A$_0$")
+    ax.set_ylabel(r"$\mu / \langle(\nabla h)^2\rangle$")
 
 
 def seeds_note(study, points, q1s=None):

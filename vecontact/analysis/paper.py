@@ -21,11 +21,10 @@ COMMON_PRESSURES = 3
 
 
 def missing_note(study):
-    """Notes for q1 without converged numerics and for seeds not (yet) all there."""
+    """Notes for the q1 without converged numerics (seeds per q1: the seeds table)."""
     have = study.q1_with_results()
-    notes = [f"q1 = {study.q1_label(q)}: no converged numerical cases in this file yet"
-             for q in study.q1s if q not in have]
-    return notes
+    return [f"q1 = {study.q1_label(q)}: no converged numerical cases in this file yet"
+            for q in study.q1s if q not in have]
 
 
 def friction_peaks(study):

@@ -36,11 +36,8 @@ class Theory:
     spectrum_q: np.ndarray
     spectrum_C: np.ndarray
 
-    def xi_at(self, velocity):
-        """xi(v) at one of the sweep's velocities."""
-        return float(self.xi[self.v_index(velocity)])
-
     def v_index(self, velocity):
+        """Index of one of the sweep's velocities (m/s) in ``velocity``."""
         return int(np.flatnonzero(self.velocity == velocity)[0])
 
 
