@@ -29,7 +29,8 @@ def missing_note(study):
 
 def friction_peaks(study):
     """Per (q1, v): the maximum of the numerical mu(A/A0) (see curves.peak), mu at the lowest load, the
-    rise mu_max / mu_lowest - 1 with its size in standard errors, and d ln mu / d ln A at A/A0 = 0.05."""
+    rise mu_max / mu_lowest - 1 with its size in standard errors, d ln mu / d ln A at A/A0 = 0.05, and
+    the same peak and rise of the theory at the same sigma0."""
     out = []
     for q1 in study.q1_with_results():
         for v in study.velocities:
@@ -37,33 +38,41 @@ def friction_peaks(study):
             if len(p) < 2:
                 continue
             a_peak, mu_peak, interior = peak(p["area"], p["mu"])
+            a_theory, mu_theory, theory_interior = peak(p["theory_area"], p["theory_mu"])
             top = int(np.argmax(p["mu"]))
             sigma = np.hypot(p["mu_se"][top], p["mu_se"][0])
             out.append(dict(q1=q1, velocity=v, n=int(p["n"].min()), area=a_peak, interior=interior,
                             pressure=float(interpolate(p["area"], p["pressure"], a_peak)), mu=mu_peak,
                             mu_lowest=float(p["mu"][0]), rise=mu_peak / p["mu"][0] - 1.0,
                             rise_in_se=(p["mu"][top] - p["mu"][0]) / sigma if sigma > 0 else np.nan,
-                            slope=log_slope(p["area"], p["mu"], REGIME_AREA)))
+                            slope=log_slope(p["area"], p["mu"], REGIME_AREA),
+                            theory_area=a_theory, theory_interior=theory_interior,
+                            theory_rise=mu_theory / p["theory_mu"][0] - 1.0))
     return out
 
 
 def friction_peaks_table(study):
     t = Table("peak", "Friction peak at small load (Fig. 2): where mu(A/A0) is largest",
               ["q1", "v (m/s)", "seeds", "A/A0 at max", "σ0 at max (Pa)", "μ max", "μ lowest load",
-               "rise", "rise / s.e.", "d ln μ / d ln A at A/A0 = 0.05"])
+               "rise", "rise / s.e.", "d ln μ / d ln A at A/A0 = 0.05", "theory: A/A0 at max", "theory: rise"])
     for r in friction_peaks(study):
-        where = num(r["area"]) if r["interior"] else f"none inside ({num(r['area'])}: an end)"
-        t.rows.append([study.q1_label(r["q1"]), num(r["velocity"]), num(r["n"]), where, num(r["pressure"]),
-                       num(r["mu"], 4), num(r["mu_lowest"], 4), f"{100 * r['rise']:+.1f} %",
-                       num(r["rise_in_se"], 2), num(r["slope"], 2)])
+        t.rows.append([study.q1_label(r["q1"]), num(r["velocity"]), num(r["n"]), _where(r["area"], r["interior"]),
+                       num(r["pressure"]), num(r["mu"], 4), num(r["mu_lowest"], 4), f"{100 * r['rise']:+.1f} %",
+                       num(r["rise_in_se"], 2), num(r["slope"], 2), _where(r["theory_area"], r["theory_interior"]),
+                       f"{100 * r['theory_rise']:+.1f} %"])
     t.notes = ["Peak: the largest seed-mean mu, refined by the parabola through it and its two neighbours "
                "in (ln A/A0, mu); sigma0 at the peak interpolated in ln sigma0 vs ln A/A0. 'none inside': the "
                "largest mu is at an end of the load range (no interior maximum).",
                "rise = mu_max / mu(lowest load) - 1; 'rise / s.e.' = (largest sample - lowest-load sample) / "
-               "sqrt(se_1^2 + se_2^2) over seeds ('—' with one seed).",
+               "sqrt(se_1^2 + se_2^2) over seeds ('—' with one seed). 'theory': the same for the theory's mu "
+               "and A/A0 at the same sigma0.",
                "d ln mu / d ln A > 0: friction still rises with load (Hertzian regime); < 0: past the peak."]
     t.notes += missing_note(study)
     return t
+
+
+def _where(area, interior):
+    return num(area) if interior else f"none inside ({num(area)}: an end)"
 
 
 def high_load_ratios(study):
