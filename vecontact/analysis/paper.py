@@ -195,14 +195,19 @@ def master_slope(study, q1=None):
 def master_slope_table(study):
     kt = erf_small_load_slope(study.nu)
     t = Table("kappa", "Small-load slope κ of the master curve: A/A0 ≈ κ σ0/(E0 ξ) (Fig. 5)",
-              ["q1", "points (A/A0 < 5 %)", "κ numerics", "κ theory", "κ_num / κ_theory"])
+              ["q1", "points (A/A0 < 5 %)", "κ numerics", "κ theory", "κ_num / κ_theory",
+               "κ/(1-ν²) numerics (E* units)", "κ/(1-ν²) theory"])
+    plane = 1.0 - study.nu ** 2
     for label, q1 in [("all", None)] + [(study.q1_label(q), q) for q in study.q1_with_results()]:
         k, se, n = master_slope(study, q1)
-        t.rows.append([label, str(n), pm(k, se), num(kt, 4), pm(k / kt, se / kt)])
+        t.rows.append([label, str(n), pm(k, se), num(kt, 4), pm(k / kt, se / kt), pm(k / plane, se / plane),
+                       num(kt / plane, 4)])
     t.notes = [f"κ theory = 2 sqrt(2) (1 - nu^2) / sqrt(pi) = {kt:.4f} (nu = {study.nu:g}), the slope of "
                "A/A0 = erf(sqrt(2) (1 - nu^2) x) at x = 0.",
                "κ numerics = exp(mean ln(A/x)) over the seed-mean points with A/A0 < 5 % (unit slope in "
-               "log-log imposed); ± = standard error of that mean across points."] + missing_note(study)
+               "log-log imposed); ± = standard error of that mean across points.",
+               "κ/(1-ν²): the same slope against σ0/(E* ξ), E* = E0/(1-ν²), the units of the elastic "
+               "literature (theory: sqrt(8/π) = 1.596)."] + missing_note(study)
     return t
 
 
