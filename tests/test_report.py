@@ -114,3 +114,15 @@ def test_partial_file(study_files, tmp_path):
     assert [os.path.basename(f) for f in figs] == [f for f in PAPER_FIGURES + BEYOND_FIGURES if "fig3" not in f]
     assert sorted(os.listdir(tmp_path / "figs")) == sorted(os.path.basename(f) for f in figs)
     assert all(_is_png(f) for f in figs)
+
+
+def test_inset_window_is_around_the_largest_patch():
+    from vecontact.plot_maps import patch_window
+    contact = np.zeros((256, 256), np.uint8)
+    contact[100:110, 40:46] = 1                       # the largest patch: extent 10 -> window 40
+    contact[200:203, 200:203] = 1
+    assert patch_window(contact) == (85, 23, 40)      # centred on it: (100 + 110 - 40) // 2, (40 + 46 - 40) // 2
+    contact[:] = 0
+    contact[0:12, 0:12] = 1                           # touching the edge: its window does not fit
+    contact[150:152, 150:152] = 1                     # so the next one's does (32 = the smallest window)
+    assert patch_window(contact) == (135, 135, 32)
