@@ -64,7 +64,7 @@ def test_plot_and_report_commands(study_files):
     q1v = 2 * 2                                                          # (q1, v) curves
     expect = {"convergence": 2, "seeds": 2, "hrms": 2, "peak": q1v, "high_load": q1v, "area_vs_v": 2 * 3,
               "collapse": 2 * (1 + 2), "kappa": 1 + 2, "maps": 2, "theory_error": q1v, "morphology": 2 * 3 * 2,
-              "cost": 2}
+              "friction_estimates": q1v, "cost": 2}
     assert {k: len(rows[k]) for k in expect} == expect
     assert len(rows["gamma"]) >= q1v                                     # (q1, v, occupied A/A0 band)
     assert rows["convergence"][0][2:5] == ["12", "12", "0"]   # 2 seeds x 2 v x 3 p, all converged

@@ -21,7 +21,7 @@ def report_tables(study, maps=None):
     if maps is not None:
         tables.append(sweep.maps_table(maps))
     tables += [beyond.theory_error_table(study), beyond.morphology_table(study), beyond.gamma_table(study),
-               sweep.cost_table(study)]
+               sweep.friction_estimates_table(study), sweep.cost_table(study)]
     return tables
 
 

@@ -26,6 +26,24 @@ def seeds_table(study):
     return t
 
 
+def friction_estimates_table(study):
+    """The two numerical friction estimates (CONVENTIONS section 4) against each other, per (q1, v)."""
+    t = Table("friction_estimates", "The two numerical friction estimates agree (a check of the numerics)",
+              ["q1", "v (m/s)", "cases", "mean of μ_geometric / μ_dissipation - 1",
+               "largest abs(μ_geometric / μ_dissipation - 1)"])
+    conv = study.converged()
+    for q1 in study.q1_with_results():
+        for v in study.velocities:
+            r = conv[(conv["q1"] == q1) & (conv["velocity"] == v)]
+            if len(r):
+                d = r["mu_geometric"] / r["mu"] - 1.0
+                t.rows.append([study.q1_label(q1), num(v), str(len(r)), f"{d.mean():+.1e}",
+                               f"{np.abs(d).max():.1e}"])
+    t.notes = ["Every converged case: mu_geometric = <p dh/dx> / sigma0, mu (the one in the figures and tables) = "
+               "the dissipated power; they differ by discretisation error only."]
+    return t
+
+
 def convergence_counts(study):
     """Per q1: (expected cases, converged, not converged, not yet solved)."""
     expected = study.expected_cases()
