@@ -133,3 +133,11 @@ def test_core_hours_sum_seconds_times_ranks():
             _case(4, 1e4, 0, np.nan, np.nan, N=2048)]                          # theory only: no time
     got = core_hours(np.stack(rows))
     assert got == {512: (1, 0.5, [1]), 2048: (2, 1.5, [4])}
+
+
+def test_table_number_formats():
+    from vecontact.analysis.tables import num, percent, pm
+    assert [num(3096.0), num(0.012345), num(1.94e6), num(np.int64(7)), num(np.nan)] == [
+        "3100", "0.0123", "1.94e+06", "7", "—"]
+    assert pm(1.2345, 0.0123) == "1.23 ± 0.012" and pm(1.2345, np.nan) == "1.23"
+    assert percent(-0.1234) == "-12.3 %" and percent(0.05, 0.01) == "+5.0 ± 1.0 %"

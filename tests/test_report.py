@@ -116,7 +116,7 @@ def test_partial_file(study_files, tmp_path):
     assert all(_is_png(f) for f in figs)
 
 
-def test_inset_window_is_around_the_largest_patch():
+def test_inset_window_is_around_a_large_patch():
     from vecontact.plot_maps import patch_window
     contact = np.zeros((256, 256), np.uint8)
     contact[100:110, 40:46] = 1                       # the largest patch: extent 10 -> window 40
@@ -126,3 +126,8 @@ def test_inset_window_is_around_the_largest_patch():
     contact[0:12, 0:12] = 1                           # touching the edge: its window does not fit
     contact[150:152, 150:152] = 1                     # so the next one's does (32 = the smallest window)
     assert patch_window(contact) == (135, 135, 32)
+    contact[:] = 0
+    for k in range(1, 11):                            # ten strips of 1 ... 10 points and one large
+        contact[20 * k + 20, 100:100 + k] = 1         # patch: the 90th percentile skips the large one
+    contact[0:40, 150:190] = 1
+    assert patch_window(contact) == ((220 + 221 - 40) // 2, (100 + 110 - 40) // 2, 40)

@@ -4,6 +4,9 @@ import numpy as np
 from vecontact.analysis.beyond import MORPHOLOGY
 from vecontact.analysis.tables import Table, num
 
+#: The morphology columns of the maps table after the patch count (an integer, printed as one).
+SIZES = [m for m in MORPHOLOGY if m[0] != "patches"]
+
 
 def _grid(study, q1):
     grid = study.job["surface"].get("grid", {})
@@ -90,12 +93,12 @@ def cost_table(study):
 def maps_table(maps):
     """The contact-map cases of Fig. 3 (``maps``: the Study of the maps file)."""
     t = Table("maps", "The contact maps of Fig. 3",
-              ["q1", "N", "seed", "v (m/s)", "σ0 (Pa)", "A/A0", "percolating"]
-              + [label for _, label, _, _ in MORPHOLOGY])
+              ["q1", "N", "seed", "v (m/s)", "σ0 (Pa)", "A/A0", "percolating", "patches"]
+              + [label for _, label, _, _ in SIZES])
     for r in maps.converged():
         t.rows.append([maps.q1_label(r["q1"]), str(int(r["N"])), str(int(r["seed"])), num(r["velocity"]),
-                       num(r["pressure"]), num(r["area"]), str(int(r["percolating"]))]
-                      + [num(r[col] * f) for col, _, f, _ in MORPHOLOGY])
+                       num(r["pressure"]), num(r["area"]), str(int(r["percolating"])), str(int(r["patches"]))]
+                      + [num(r[col] * f) for col, _, f, _ in SIZES])
     t.notes = [f"From {maps.path} (converged cases only)."]
     t.notes += [f"q1 = {maps.q1_label(q)}: no converged map case yet" for q in maps.q1s
                 if q not in maps.q1_with_results()]

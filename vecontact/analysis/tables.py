@@ -28,12 +28,14 @@ class Table:
 
 
 def num(x, digits=3):
-    """A number with ``digits`` significant digits; '—' for NaN or None."""
+    """A number with ``digits`` significant digits (no exponent from 1e3 to 1e6: 3096 -> '3100');
+    '—' for NaN or None."""
     if x is None or (isinstance(x, (float, np.floating)) and math.isnan(x)):
         return "—"
     if isinstance(x, (int, np.integer)):
         return str(int(x))
-    return f"{x:.{digits}g}"
+    rounded = float(f"{x:.{digits}g}")
+    return f"{rounded:.0f}" if 1e3 <= abs(rounded) < 1e6 else f"{x:.{digits}g}"
 
 
 def pm(x, se, digits=3):
