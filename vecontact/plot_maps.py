@@ -110,6 +110,6 @@ def maps_figure(maps, outdir):
                                   f"σ0 = {float(a['pressure']):.3g} Pa, seed {int(a['seed'])}")
     fig.subplots_adjust(left=0.07, right=0.98, top=0.84, bottom=0.14, wspace=0.25)
     note = (f"Fig. 3: contact morphology (black: contact), from {maps.path}: one surface realisation per map "
-            f"(no seed average). Inset: a window around a large patch (90th percentile of sizes), enlarged; the red box marks it on "
-            f"the map.")
+            f"(no seed average). Inset: a window around a large patch (90th percentile of sizes), enlarged; "
+            f"the red box marks it on the map.")
     return save(fig, outdir, "fig3_contact_maps.png", note, dpi=200, tight=False)
