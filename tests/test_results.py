@@ -107,7 +107,9 @@ def test_theory_job_end_to_end_and_plot(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "vecontact", "plot", out, "-o", str(tmp_path / "fig")],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    for name in ("fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png"):
+    assert "fig 3 (contact maps) skipped" in proc.stdout                # no --maps
+    for name in ("fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png",
+                 "theory_error.png", "morphology.png", "morphology_vs_v.png", "gamma_sensitivity.png"):
         p = tmp_path / "fig" / name
         assert p.stat().st_size > 10000
         assert open(p, "rb").read(8) == b"\x89PNG\r\n\x1a\n"

@@ -1,4 +1,4 @@
-"""The ``vecontact`` command line: run, surface, plot, status, info, test.
+"""The ``vecontact`` command line: run, surface, plot, report, status, info, test.
 
 Bad input gives one line ``vecontact: error: KEY: PROBLEM`` on stderr and exit status 2,
 without a traceback and without writing anything.
@@ -34,6 +34,11 @@ def _parser():
     pl = sub.add_parser("plot", help="draw the paper's figures from a results file")
     pl.add_argument("results", help="results HDF5 file")
     pl.add_argument("-o", "--outdir", help="folder for the PNGs (default: next to the results)")
+    pl.add_argument("--maps", help="results file with contact fields (jobs/paper-maps.yaml) for Fig. 3")
+    rp = sub.add_parser("report", help="the report's numbers from a results file, as markdown tables")
+    rp.add_argument("results", help="results HDF5 file")
+    rp.add_argument("--maps", help="results file with contact fields (jobs/paper-maps.yaml)")
+    rp.add_argument("-o", "--output", help="markdown file (default: RESULTS without .h5 + -numbers.md)")
     st = sub.add_parser("status", help="how far a sweep has got and what failed, from its results file")
     st.add_argument("results", help="results HDF5 file")
     sub.add_parser("info", help="versions of the stack and the number of ranks")
@@ -95,9 +100,15 @@ def _dispatch(argv):
         from vecontact.status import status
         return status(args.results)
     if args.command == "plot":
-        from vecontact.plot import plot_results
-        for path in plot_results(args.results, args.outdir):
+        from vecontact.plot import MAPS_SKIPPED, plot_results
+        for path in plot_results(args.results, args.outdir, args.maps):
             print(path)
+        if args.maps is None:
+            print(f"vecontact: {MAPS_SKIPPED}")
+        return 0
+    if args.command == "report":
+        from vecontact.analysis.report import write_report
+        print(write_report(args.results, args.maps, args.output))
         return 0
     if args.command in ("run", "surface"):
         from mpi4py import MPI

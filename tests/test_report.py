@@ -1,0 +1,133 @@
+"""``vecontact plot`` and ``vecontact report`` on a tiny study made here: every figure and table is
+produced, from a complete and from a partial results file, and the numbers are those of the file."""
+import os
+import re
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+
+from test_farm import vecontact, write_job
+from vecontact.analysis.beyond import gamma_sensitivity
+from vecontact.analysis.report import write_report
+from vecontact.analysis.study import load_study
+from vecontact.plot import MAPS_SKIPPED
+
+PAPER_FIGURES = ["fig1_spectrum.png", "fig2_friction.png", "fig3_contact_maps.png", "fig4_area.png",
+                 "fig5_master.png"]
+BEYOND_FIGURES = ["theory_error.png", "morphology.png", "morphology_vs_v.png", "gamma_sensitivity.png"]
+
+
+@pytest.fixture(scope="module")
+def study_files(tmp_path_factory):
+    """A 2-seed study at q1 = 8, 16 q0 (N = 64, 128), v = 0.01 and 1 m/s, 3 pressures, and a maps file
+    with the contact field of one case per q1 at v = 10 m/s, A/A0 ~ 5 %."""
+    d = tmp_path_factory.mktemp("study")
+    job = write_job(d / "job.yaml", seeds=(1, 2))
+    maps = write_job(d / "maps.yaml", output="maps.h5", velocity=(10.0,), fields=["contact"],
+                     pressure={"area_min": 0.05, "area_max": 0.05, "num": 1})
+    for j in (job, maps):
+        p = vecontact(0, ["run", j, "--quiet"], cwd=d)
+        assert p.returncode == 0, p.stdout + p.stderr
+    return d
+
+
+def _is_png(path):
+    with open(path, "rb") as f:
+        return f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def _tables(text):
+    """{anchor key: data rows of the table after it}."""
+    out = {}
+    for key, body in re.findall(r'<a id="(\w+)"></a>(.*?)(?=<a id=|\Z)', text, flags=re.S):
+        rows = [line for line in body.splitlines() if line.startswith("| ") and not line.startswith("| --- |")]
+        out[key] = [line.strip("| ").split(" | ") for line in rows[1:]]  # cells; header dropped
+    return out
+
+
+def test_plot_and_report_commands(study_files):
+    d = study_files
+    p = vecontact(0, ["plot", "out.h5", "--maps", "maps.h5", "-o", "figs"], cwd=d, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert MAPS_SKIPPED not in p.stdout
+    for name in PAPER_FIGURES + BEYOND_FIGURES:
+        assert os.path.join("figs", name) in p.stdout.split()
+        assert (d / "figs" / name).stat().st_size > 10000 and _is_png(d / "figs" / name)
+    p = vecontact(0, ["report", "out.h5", "--maps", "maps.h5", "-o", "numbers.md"], cwd=d)
+    assert p.returncode == 0, p.stderr
+    text = (d / "numbers.md").read_text()
+    assert text.startswith("# Paper-reproduction numbers (generated: do not edit)")
+    assert "`vecontact report out.h5 --maps maps.h5 -o numbers.md`" in text
+    rows = _tables(text)
+    q1v = 2 * 2                                                          # (q1, v) curves
+    expect = {"convergence": 2, "seeds": 2, "hrms": 2, "peak": q1v, "high_load": q1v, "area_vs_v": 2 * 3,
+              "collapse": 2 * (1 + 2), "kappa": 1 + 2, "maps": 2, "theory_error": q1v, "morphology": 2 * 3 * 2,
+              "friction_estimates": q1v, "cost": 2}
+    assert {k: len(rows[k]) for k in expect} == expect
+    assert len(rows["gamma"]) >= q1v                                     # (q1, v, occupied A/A0 band)
+    assert rows["convergence"][0][2:5] == ["12", "12", "0"]   # 2 seeds x 2 v x 3 p, all converged
+    assert rows["seeds"][1][2:4] == ["1, 2", "1, 2"]
+    assert "no common" not in text and "—" not in str(rows["area_vs_v"])
+    # the cost table is sum(seconds x ranks) / 3600 of the file's rows
+    with h5py.File(d / "out.h5", "r") as f:
+        cases = f["cases"][()]
+    for N, n, hours, *_ in rows["cost"]:
+        mine = cases[cases["N"] == int(N)]
+        assert int(n) == len(mine)
+        assert float(hours) == pytest.approx(np.sum(mine["seconds"] * mine["ranks"]) / 3600, rel=5e-3)  # 3 digits
+
+
+def test_gamma_recomputation_matches_the_file(study_files):
+    rows, area_change, self_check = gamma_sensitivity(load_study(str(study_files / "out.h5")))
+    assert len(rows) == 4
+    assert area_change == 0.0          # gamma enters S(q) only: A/A0 = P(q1) is the same number
+    assert self_check < 1e-12          # the same code and quadrature as the run: equal to rounding
+    for r in rows:                     # S = gamma + (1 - gamma) P^2 grows with gamma, and so does mu
+        assert np.all(r["mu"][0.45] < r["mu"][0.5]) and np.all(r["mu"][0.5] < r["mu"][5 / 9])
+
+
+def test_partial_file(study_files, tmp_path):
+    """A sweep still running: the second q1 has no rows and seed 2 is missing at the lowest pressures of
+    the first. Figures (fig 3 skipped with a note: no --maps) and tables are all produced and say what is
+    missing."""
+    path = str(tmp_path / "partial.h5")
+    shutil.copy(study_files / "out.h5", path)
+    with h5py.File(path, "r+") as f:
+        cases = f["cases"][()]
+        first = cases["q1"] == cases["q1"].min()
+        keep = cases[first & ((cases["seed"] == 1) | (cases["pressure"] > cases["pressure"][first].min()))]
+        del f["cases"]
+        f["cases"] = keep
+        del f["diagnostics"]
+    out = write_report(path, out=str(tmp_path / "n.md"))
+    rows = _tables(open(out).read())
+    assert rows["convergence"][1][2:6] == ["12", "0", "0", "12"]
+    assert rows["seeds"][0][3] == "1, 2" and rows["seeds"][1][3] == "none"
+    assert "q1 = 16 q0: no converged numerical cases in this file yet" in open(out).read()
+    assert len(rows["peak"]) == 2 and len(rows["kappa"]) == 2
+    p = vecontact(0, ["plot", path, "-o", str(tmp_path / "figs")], cwd=tmp_path, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.splitlines()[-1] == f"vecontact: {MAPS_SKIPPED}"
+    figs = p.stdout.splitlines()[:-1]
+    assert [os.path.basename(f) for f in figs] == [f for f in PAPER_FIGURES + BEYOND_FIGURES if "fig3" not in f]
+    assert sorted(os.listdir(tmp_path / "figs")) == sorted(os.path.basename(f) for f in figs)
+    assert all(_is_png(f) for f in figs)
+
+
+def test_inset_window_is_around_a_large_patch():
+    from vecontact.plot_maps import patch_window
+    contact = np.zeros((256, 256), np.uint8)
+    contact[100:110, 40:46] = 1                       # the largest patch: extent 10 -> window 40
+    contact[200:203, 200:203] = 1
+    assert patch_window(contact) == (85, 23, 40)      # centred on it: (100 + 110 - 40) // 2, (40 + 46 - 40) // 2
+    contact[:] = 0
+    contact[0:12, 0:12] = 1                           # touching the edge: its window does not fit
+    contact[150:152, 150:152] = 1                     # so the next one's does (32 = the smallest window)
+    assert patch_window(contact) == (135, 135, 32)
+    contact[:] = 0
+    for k in range(1, 11):                            # ten strips of 1 ... 10 points and one large
+        contact[20 * k + 20, 100:100 + k] = 1         # patch: the 90th percentile skips the large one
+    contact[0:40, 150:190] = 1
+    assert patch_window(contact) == ((220 + 221 - 40) // 2, (100 + 110 - 40) // 2, 40)
