@@ -31,7 +31,7 @@ from mpi4py import MPI
 
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
 
-__all__ = ["ContactSetStep"]
+__all__ = ["ContactSetStep", "oracle_solve"]
 
 
 class _Restricted:
@@ -186,3 +186,38 @@ class ContactSetStep:
             except Exception:
                 pass
         self._own_keys = []
+
+
+def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
+    """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
+    rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
+    most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.
+
+    Returns dict(iterations, pairs (FFT pairs of the grid of ``op``, set-up included), residual (the
+    inner solve's final residual norm, h_rms), converged)."""
+    from vecontact.solver.snes import petsc
+    PETSc = petsc()
+    fft = op.fft
+    comm = fft.comm
+    nloc = int(np.prod(fft.local_real_shape))
+    n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+    step = ContactSetStep(op, op.kappa, PETSc, prefix, settings)
+    r = y = None
+    try:
+        t0 = fft.transforms
+        step.set_active(act, n_act)
+        step.set_tolerances(rtol, 0.0, max_it)
+        # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
+        rhs = np.where(act, op.hhat, -1.0 / op.kappa)
+        r = PETSc.Vec().createMPI((nloc, fft.N * fft.N), comm=comm)
+        r.getArray()[:] = rhs.ravel()
+        y = r.duplicate()
+        step.apply(None, r, y)
+        pairs = (fft.transforms - t0) / 2.0
+        return dict(iterations=int(step.iterations), pairs=float(pairs),
+                    residual=float(step.ksp.getResidualNorm()), converged=bool(step.ksp.getConvergedReason() > 0))
+    finally:
+        step.release()
+        for v in (r, y):
+            if v is not None:
+                v.destroy()
