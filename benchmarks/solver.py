@@ -6,7 +6,7 @@ Usage (from the repository root):
                                 [--areas-4096 0.05] [--pk-max-n 2048]
 
 Starts its own MPI runs (``mpiexec -n RANKS python benchmarks/solver.py --worker N ...``), one per grid
-size, on the paper's surfaces (CONVENTIONS section 2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
+size, on the paper's surfaces (docs/conventions.md §2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
 C0 = 1.0616e-28 m^4, q1 = N/16 q0, i.e. N = 512, 1024, 2048, 4096 for q1 = 32..256 q0, seed 1) with the
 reference Havriliak-Negami compound at v = 0.01 and 10 m/s, nominal pressures aimed at A/A0 ~ 1 %, 5 %,
 30 % (Persson's theory, corrected by one cheap coarse-grid solve on the N/4 grid, which holds all the

@@ -27,7 +27,7 @@ from vecontact.physics.theory import persson
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ENV = dict(os.environ, PYTHONPATH=ROOT, OMP_NUM_THREADS="1")
 Q0 = 2.5e5
-PAPER = SelfAffine(Q0, 4 * Q0, 256 * Q0, 0.8, 1.0616e-28)      # CONVENTIONS section 2
+PAPER = SelfAffine(Q0, 4 * Q0, 256 * Q0, 0.8, 1.0616e-28)      # docs/conventions.md §2
 HN = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10)                  # the reference compound
 MATERIAL = {"model": "havriliak-negami", "E0": 3e6, "Einf": 3e9, "alpha": 0.5, "beta": 0.5, "tau": 1e-10}
 

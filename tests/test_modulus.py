@@ -1,4 +1,4 @@
-"""Tests of vecontact.physics.modulus (CONVENTIONS.md section 3)."""
+"""Tests of vecontact.physics.modulus (docs/conventions.md §3)."""
 import math
 
 import numpy as np
@@ -75,7 +75,7 @@ def test_havriliak_negami_reference_compound():
     w = np.geomspace(1e6, 1e9, 30001)           # spacing 2.3e-4 in log10 w
     E = hn(w)
     peak = w[np.argmax(E.imag / E.real)]
-    # CONVENTIONS: tan(delta) peaks near 2.7e7 rad/s (found 2.70e7); 1 % covers the printed digits.
+    # docs/conventions.md: tan(delta) peaks near 2.7e7 rad/s (found 2.70e7); 1 % covers the printed digits.
     assert peak == pytest.approx(2.7e7, rel=0.01)
     # Direct evaluation at w tau = 1: (i)^0.5 = exp(i pi/4), E = Einf + (E0 - Einf)/sqrt(1 + exp(i pi/4)).
     expected = 3e9 + (3e6 - 3e9) / np.sqrt(1 + np.exp(0.25j * math.pi))

@@ -1,4 +1,4 @@
-"""Contact solver vs closed-form results (CONVENTIONS 6): Westergaard, JGH 2-D sinusoid, full contact.
+"""Contact solver vs closed-form results (docs/conventions.md §6): Westergaard, JGH 2-D sinusoid, full contact.
 
 Tolerances are the discretisation errors of the exact discrete problem (measured with the dense
 reference, tests/reference), not of the solver: the solver itself is checked to ~1e-6 against the
@@ -44,7 +44,7 @@ def westergaard_refs():
 def test_westergaard(method, westergaard_refs):
     """1-D sinusoid h = D cos(2 pi x / L), constant along y, elastic, N = 128, r = pbar/p* = 0.1, 0.3, 0.7.
 
-    Tolerances vs the continuum (CONVENTIONS 6): A/A0 within 2/N (the contact edge falls between
+    Tolerances vs the continuum (docs/conventions.md §6): A/A0 within 2/N (the contact edge falls between
     grid points: one point per edge; the exact discrete solution is within 0.8/N), p_max within 0.5%
     (exact discrete: <= 3e-5), mean gap within 0.1% (exact discrete: <= 5.7e-4 at r = 0.7).
     Against the exact discrete solution (dense 1-D reference, unique LCP solution): same contact

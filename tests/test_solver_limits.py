@@ -84,7 +84,7 @@ class GlassyExceptStatic:
     """Real (elastic-type) modulus E = E0 at omega = 0 and Einf at omega != 0: the v -> infinity limit
     of the discrete operator. The modes with q_x = 0 (ridges along the sliding direction) are felt at
     zero frequency for any v, so on an N x N grid the limit is NOT the Einf elastic solution
-    (CONVENTIONS 6 states it for the continuum, where q_x = 0 has measure zero); it is exactly this."""
+    (docs/conventions.md §6 states it for the continuum, where q_x = 0 has measure zero); it is exactly this."""
 
     def __init__(self, E0, Einf, nu=0.5):
         self.E0, self.Einf, self.nu = float(E0), float(Einf), float(nu)
@@ -149,7 +149,7 @@ def _mu_vs_geometric(N, q1_factor, v, sigma0):
 
 # Paper spectrum (q0 = 2.5e5, qr = 4 q0, H = 0.8, C0 = 1.0616e-28), null band factor 8 (N = 16 q1/q0),
 # HN modulus. mu (dissipation) and mu_geometric differ only by the discretisation error of the
-# contact edges (CONVENTIONS 4: "agree to discretisation error"), which grows as the contact spots
+# contact edges (docs/conventions.md §4: "agree to discretisation error"), which grows as the contact spots
 # shrink: measured mu_geo/mu - 1 = -0.8% (A/A0 = 1.8%), -1.3% (1.4%), -0.3% (26%) at N = 256 and
 # -0.7% (1.2%), -0.7% (2.6%) at N = 512; -2.5% at A/A0 = 0.5% (below the 1% this check is
 # meant for). Tolerance 2% at A/A0 >= 1%.

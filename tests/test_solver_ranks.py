@@ -1,4 +1,4 @@
-"""Rank independence of the contact solver (CONVENTIONS 6): the same job on 1, 2 and 3 ranks gives the
+"""Rank independence of the contact solver (docs/conventions.md §6): the same job on 1, 2 and 3 ranks gives the
 same surface bit for bit and the same results to solver tolerance.
 
 N = 64 splits unevenly on 3 ranks (22/21/21 rows) and 2 ranks (32/32); with the rfft layout the

@@ -1,4 +1,4 @@
-"""Tests of vecontact.physics.spectrum (CONVENTIONS.md section 2)."""
+"""Tests of vecontact.physics.spectrum (docs/conventions.md §2)."""
 import math
 
 import numpy as np
@@ -28,7 +28,7 @@ def simpson_log_moment(psd, n, points_per_piece=4001):
 
 
 def test_paper_rms_heights():
-    # CONVENTIONS section 2: 27.0 nm at q1 = 256 q0 and 26.7 nm at q1 = 32 q0 (printed digits).
+    # docs/conventions.md §2: 27.0 nm at q1 = 256 q0 and 26.7 nm at q1 = 32 q0 (printed digits).
     assert round(paper(256).hrms() * 1e9, 1) == 27.0
     assert round(paper(32).hrms() * 1e9, 1) == 26.7
 

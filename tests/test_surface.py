@@ -19,7 +19,7 @@ import surface_check  # noqa: E402
 
 COMM = MPI.COMM_SELF
 
-# the paper's spectrum (CONVENTIONS section 2), q1 = 32 q0 -> N = 16 q1/q0 = 512
+# the paper's spectrum (docs/conventions.md §2), q1 = 32 q0 -> N = 16 q1/q0 = 512
 Q0 = 2.5e5
 L = 2 * np.pi / Q0
 QR = 4 * Q0
@@ -174,7 +174,7 @@ def test_paper_surface_statistics(paper_grid):
           f"slope2 {st['slope_rms'] ** 2 / s2 - 1:.3e} (bound {tol_s / s2:.3e})")
     assert abs(st["hrms"] ** 2 - h2) <= tol_h
     assert abs(st["slope_rms"] ** 2 - s2) <= tol_s
-    assert np.sqrt(h2) == pytest.approx(26.7e-9, rel=2e-3)  # CONVENTIONS: 26.7 nm at q1 = 32 q0
+    assert np.sqrt(h2) == pytest.approx(26.7e-9, rel=2e-3)  # docs/conventions.md: 26.7 nm at q1 = 32 q0
 
     # radial PSD: per bin, exactly the mean of C over the modes in the bin (fixed amplitudes) ...
     qc, Cest = fft.radial_psd(h, L)

@@ -1,4 +1,4 @@
-"""Tests of vecontact.physics.theory: Persson's theory (CONVENTIONS.md sections 4-6)."""
+"""Tests of vecontact.physics.theory: Persson's theory (docs/conventions.md sections 4-6)."""
 import math
 
 import numpy as np
@@ -117,7 +117,7 @@ def test_master_curve_identity():
 
 
 def lattice_mu(psd, modulus, v, sigma0, dq):
-    """CONVENTIONS section 4 with w = h: mu = sum_{q != 0} |q| q_x E''(q_x v) |h_q|^2 / (2 (1-nu^2) sigma0),
+    """docs/conventions.md §4 with w = h: mu = sum_{q != 0} |q| q_x E''(q_x v) |h_q|^2 / (2 (1-nu^2) sigma0),
     |h_q|^2 = C(|q|) dq^2 on the lattice q = dq (m, n) (the origin has C = 0)."""
     n = int(math.ceil(psd.q_max / dq))
     k = np.arange(-n, n + 1) * dq

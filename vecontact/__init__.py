@@ -1,7 +1,7 @@
 """vecontact: viscoelastic steady sliding contact of rough surfaces.
 
 Persson's mean-field theory and the exact numerical solution, MPI-parallel.
-Conventions (SI units, Fourier, PSD, modulus sign, friction) follow CONVENTIONS.md.
+Conventions (SI units, Fourier, PSD, modulus sign, friction) follow docs/conventions.md.
 
 The Python API (``import vecontact as vc``; docs/api.md) lives in :mod:`vecontact.api`; its names
 are loaded on first use, so ``import vecontact`` (and the command line) stays light.

@@ -27,7 +27,7 @@ __all__ = ["load_job", "make_job", "run", "read_results", "plot_results", "surfa
            "read_psd", "self_affine", "modulus", "theory", "solve", "Surface", "Theory", "InputError",
            "InputWarning", "ConvergenceWarning", "REFERENCE_COMPOUND"]
 
-#: The reference tread compound of CONVENTIONS.md section 3 (Havriliak-Negami): ``vc.modulus(**REFERENCE_COMPOUND)``.
+#: The reference tread compound of docs/conventions.md §3 (Havriliak-Negami): ``vc.modulus(**REFERENCE_COMPOUND)``.
 REFERENCE_COMPOUND = {"model": "havriliak-negami", "E0": 3.0e6, "Einf": 3.0e9, "alpha": 0.5, "beta": 0.5,
                       "tau": 1.0e-10, "nu": 0.5}
 
@@ -215,7 +215,7 @@ def read_psd(path, dimension=2, columns=None):
 
 
 def self_affine(q0, qr, q1, hurst, *, C0=None, hrms=None):
-    """The paper's self-affine spectrum with roll-off (CONVENTIONS.md section 2): q0 <= qr < q1
+    """The paper's self-affine spectrum with roll-off (docs/conventions.md §2): q0 <= qr < q1
     (1/m), Hurst exponent 0 < H < 1, and exactly one of C0 (m^4) or hrms (m)."""
     from vecontact.physics.spectrum import SelfAffine
     v = {k: jobs._number({k: x}, k, "surface", lo=0, lo_open=True)
@@ -284,7 +284,7 @@ def _values(x, name, positive):
 
 @dataclass
 class Theory:
-    """Persson's theory (CONVENTIONS.md section 5) at every (velocity, pressure).
+    """Persson's theory (docs/conventions.md §5) at every (velocity, pressure).
 
     ``area`` (A/A0 = P(q1)) and ``mu`` have shape (V, P), ``xi`` (effective rms slope) shape (V,),
     ``P`` (the contact probability P(q) at the wavevectors ``q``, 1/m) shape (V, P, Q); an axis is

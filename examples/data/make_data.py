@@ -6,7 +6,7 @@ They stand in for measurements (no measured data of the paper's compound is publ
   amplitudes (so it is as noisy as a measured spectrum) drawn from a self-affine spectrum with
   roll-off: L = 50 um, qr = 4 q0, q1 = 64 q0, H = 0.8, h_rms = 0.3 um;
 * ``dma_master_curve.csv``: a DMA master curve at T_ref = 20 C, f in Hz, E' and E'' in MPa,
-  sampled from the reference Havriliak-Negami compound of CONVENTIONS.md (E0 = 3 MPa,
+  sampled from the reference Havriliak-Negami compound of docs/conventions.md (E0 = 3 MPa,
   Einf = 3 GPa, alpha = beta = 0.5, tau = 1e-10 s), with a temperature column and tan(delta)
   as a DMA export has them;
 * ``scan.x3p``: a 64 x 48 optical-profilometer-like scan in X3P (heights in float32, 0.39 um

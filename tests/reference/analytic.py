@@ -1,4 +1,4 @@
-"""Closed-form contact results used as references (CONVENTIONS.md section 6).
+"""Closed-form contact results used as references (docs/conventions.md §6).
 
 All functions are pure numpy/math; E* = E / (1 - nu^2).
 """

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-# Paper's length scale: q0 = 2 pi / L = 2.5e5 1/m (CONVENTIONS 2).
+# Paper's length scale: q0 = 2 pi / L = 2.5e5 1/m (docs/conventions.md §2).
 Q0 = 2.5e5
 L_PAPER = 2.0 * math.pi / Q0
 E_RUBBER = 3.0e6
@@ -26,7 +26,7 @@ class ConstModulus:
 
 
 class HNModulus:
-    """Havriliak-Negami modulus written out independently (CONVENTIONS 3) for the reference tests."""
+    """Havriliak-Negami modulus written out independently (docs/conventions.md §3) for the reference tests."""
 
     def __init__(self, E0=3e6, Einf=3e9, alpha=0.5, beta=0.5, tau=1e-10, nu=0.5):
         self.E0, self.Einf, self.alpha, self.beta, self.tau, self.nu = E0, Einf, alpha, beta, tau, nu
@@ -39,7 +39,7 @@ class HNModulus:
 
 
 class PowerSpectrum:
-    """Self-affine spectrum with roll-off, written out independently (CONVENTIONS 2)."""
+    """Self-affine spectrum with roll-off, written out independently (docs/conventions.md §2)."""
 
     def __init__(self, q0, qr, q1, hurst, C0):
         self.q0, self.qr, self.q1, self.hurst, self.C0 = q0, qr, q1, hurst, C0

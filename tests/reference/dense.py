@@ -1,6 +1,6 @@
 """Dense direct reference solver for the discrete steady-sliding contact problem (small grids).
 
-Written independently of ``vecontact.solver`` from CONVENTIONS.md sections 1 and 4 only:
+Written independently of ``vecontact.solver`` from docs/conventions.md sections 1 and 4 only:
 
 * grid N x N, side L, x = (i, j) dx, axis 0 = x = sliding direction;
 * h_q = fft2(h) / N^2, q = 2 pi / L (m, n) in numpy's fftfreq order;
@@ -133,7 +133,7 @@ def compliance_matrix(M, method="kernel"):
 # ----------------------------------------------------------------------------- friction
 
 def mu_dissipation(w, L, modulus, nu, velocity, sigma0, literal=False):
-    """Dissipation estimate of mu (CONVENTIONS 4) from the displacement field w (any mean).
+    """Dissipation estimate of mu (docs/conventions.md §4) from the displacement field w (any mean).
 
     Default (``literal=False``): sum_{q != 0} q_x Im(M_q) |w_q|^2 / sigma0 with M_q exactly as the
     operator uses it (x-Nyquist row real, so no dissipation there); this equals <p dh/dx>/sigma0

@@ -3,7 +3,7 @@
 Relative error of the theory at a point: theory / numerics - 1 (theory at the point's sigma0, numerics
 the seed mean); its standard error (theory / numerics) * se / numerics. Morphology: the /cases columns
 (patches, mean_patch_area in m^2, perimeter in m, the two anisotropies), seed-averaged, read at fixed
-A/A0 by interpolation in ln A/A0. gamma: the S(q) parameter of the theory (CONVENTIONS section 5).
+A/A0 by interpolation in ln A/A0. gamma: the S(q) parameter of the theory (docs/conventions.md §5).
 """
 import numpy as np
 

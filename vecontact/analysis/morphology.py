@@ -1,6 +1,6 @@
 """Contact-morphology statistics of a periodic contact map: patches, their size, perimeter, anisotropy.
 
-Conventions (CONVENTIONS.md section 1): the map is an N x M grid of spacing dx (m, the same along both
+Conventions (docs/conventions.md §1): the map is an N x M grid of spacing dx (m, the same along both
 axes) covering a periodic cell; axis 0 is x, the sliding direction (the rubber moves along +x), axis 1
 is y. A pixel is one grid point of area dx^2.
 

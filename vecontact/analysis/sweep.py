@@ -30,7 +30,7 @@ def seeds_table(study):
 
 
 def friction_estimates_table(study):
-    """The two numerical friction estimates (CONVENTIONS section 4) against each other, per (q1, v)."""
+    """The two numerical friction estimates (docs/conventions.md §4) against each other, per (q1, v)."""
     t = Table("friction_estimates", "The two numerical friction estimates agree (a check of the numerics)",
               ["q1", "v (m/s)", "cases", "mean of μ_geometric / μ_dissipation - 1",
                "largest abs(μ_geometric / μ_dissipation - 1)"])

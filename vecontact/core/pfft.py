@@ -1,6 +1,6 @@
 """Distributed real 2-D FFT on an N x N periodic grid (slab decomposition, MPI + FFTW).
 
-Conventions (see CONVENTIONS.md section 1)
+Conventions (see docs/conventions.md §1)
 ------------------------------------------
 * Real space: array ``f[i, j]`` at x = (i, j) L/N. Axis 0 (x, the sliding direction, index i) is split
   by contiguous row blocks across ranks, axis 1 (y) is whole on every rank:
@@ -10,7 +10,7 @@ Conventions (see CONVENTIONS.md section 1)
   Axis 0 is kx in numpy ``fftfreq`` order (``kx = 0, 1, .., -N/2, .., -1``, integers), axis 1 is
   ky = col_start .. col_stop-1 (global ky range 0 .. N//2, i.e. N//2+1 columns).
   Wavevector q = (2 pi / L) (kx, ky) in 1/m.
-* ``forward`` is unnormalised like ``numpy.fft.rfft2`` (so the Fourier coefficient of CONVENTIONS is
+* ``forward`` is unnormalised like ``numpy.fft.rfft2`` (so the Fourier coefficient of docs/conventions.md is
   h_q = forward(h) / N^2); ``backward`` is ``numpy.fft.irfft2`` (includes the 1/N^2).
 
 Algorithm: forward = r2c along y on the local rows -> global transpose (MPI ``Alltoallw`` with subarray
@@ -379,7 +379,7 @@ class SlabFFT:
         return self.N // 2 if self.N % 2 == 0 else None
 
     def hermitian_fix(self, multiplier):
-        """Make a multiplier valid for real -> real operators (CONVENTIONS section 1).
+        """Make a multiplier valid for real -> real operators (docs/conventions.md §1).
 
         On the x-Nyquist row (kx = -N/2, N even) the multiplier is replaced by its real part (in place
         when ``multiplier`` is a full-height complex array, otherwise a fixed copy broadcast to

@@ -1,6 +1,6 @@
 """Rough surfaces on a distributed grid: generation from a PSD, loading from files, statistics.
 
-Conventions (CONVENTIONS.md sections 1-2, 6): heights in m on the periodic N x N grid of side L held by
+Conventions (docs/conventions.md sections 1-2, 6): heights in m on the periodic N x N grid of side L held by
 a :class:`vecontact.core.pfft.SlabFFT` (rows ``row_start:row_stop`` on each rank);
 h(x) = sum_q h_q exp(i q.x), h_q = fft2(h)/N^2, |h_q|^2 = C(|q|) (2 pi/L)^2 (Persson's PSD C, m^4).
 
@@ -84,7 +84,7 @@ def coefficients(fft, L, psd, seed, amplitudes="fixed"):
 
 
 def synthesize(fft, hq, out=None):
-    """Deterministic inverse transform h(x) = sum_q h_q exp(i q.x) (no 1/N^2: h_q are CONVENTIONS
+    """Deterministic inverse transform h(x) = sum_q h_q exp(i q.x) (no 1/N^2: h_q are docs/conventions.md
     coefficients).  Bit-identical for any decomposition: one 1-D numpy transform per line (ifft along x
     for each local ky column, MPI transpose, irfft along y for each local row).  Slower than
     ``fft.backward`` (fine for set-up work).  Uses the SlabFFT scratch buffers."""

@@ -2,7 +2,7 @@
 
 File: two columns, q (1/m) and the PSD (table format of :mod:`vecontact.io.tables`), either
 
-* ``dimension=2`` (default): Persson's isotropic 2-D C(q) in m^4 (CONVENTIONS.md section 2,
+* ``dimension=2`` (default): Persson's isotropic 2-D C(q) in m^4 (docs/conventions.md §2,
   h_rms^2 = 2 pi Int q C dq), or
 * ``dimension=1``: a line-scan PSD C1D(q) in m^3 (two-sided, h_rms^2 = Int_{-inf}^{inf} C1D dq),
   converted to the 2-D C(q) by the Abel inversion of

@@ -1,6 +1,6 @@
 """The results file: one HDF5 file per job, written by one rank, never half-written.
 
-Layout (see README, "Results file"):
+Layout (see docs/results-format.md):
 
 - root attributes: ``format``, ``vecontact_version``, ``git_commit``, ``job_yaml``,
   ``physics_hash``, ``created``, ``updated``, ``nranks``, ``complete`` (version, commit and ranks of

@@ -1,4 +1,4 @@
-"""Linear viscoelastic moduli E(omega) of the rubber (CONVENTIONS.md section 3).
+"""Linear viscoelastic moduli E(omega) of the rubber (docs/conventions.md §3).
 
 Every model is a callable ``model(omega) -> complex ndarray`` with
 

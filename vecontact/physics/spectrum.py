@@ -1,4 +1,4 @@
-"""Isotropic roughness power spectra C(q) in Persson's convention (CONVENTIONS.md section 2).
+"""Isotropic roughness power spectra C(q) in Persson's convention (docs/conventions.md §2).
 
 C(q) = (2 pi)^-2 Int d^2x <h(x) h(0)> exp(-i q.x), in m^4, with q = |q| in 1/m, so that
 h_rms^2 = 2 pi Int q C(q) dq and the (full 2-D) mean-square slope is

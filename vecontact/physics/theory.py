@@ -1,4 +1,4 @@
-"""Persson's mean-field theory of viscoelastic contact and friction (CONVENTIONS.md section 5).
+"""Persson's mean-field theory of viscoelastic contact and friction (docs/conventions.md §5).
 
 For a rubber (modulus E(omega), Poisson ratio nu) sliding at velocity v over a rigid rough surface
 with isotropic power spectrum C(q), under nominal pressure sigma0:

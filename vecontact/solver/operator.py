@@ -1,6 +1,6 @@
 """Nondimensional stiffness / compliance multipliers of the steady-sliding contact problem.
 
-CONVENTIONS section 4: for q != 0, p_q = M_q w_q with M_q = |q| E(q_x v) / (2 (1 - nu^2)); the q = 0
+docs/conventions.md §4: for q != 0, p_q = M_q w_q with M_q = |q| E(q_x v) / (2 (1 - nu^2)); the q = 0
 mode is the rigid-body position (load control).  Everything the iterative solvers see is
 nondimensional:
 

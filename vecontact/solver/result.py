@@ -1,4 +1,4 @@
-"""ContactResult and the scalar post-processing (CONVENTIONS section 4).
+"""ContactResult and the scalar post-processing (docs/conventions.md §4).
 
 * area          A/A0 = fraction of grid points with p > 0 (the returned pressure is exactly 0 off contact)
 * mu            dissipation estimate  sum_{q != 0} |q| q_x E''(q_x v) |w_q|^2 / (2 (1 - nu^2) sigma0),

@@ -186,7 +186,7 @@ PETSC_DEFAULTS = {
 PETSC_VI_DEFAULTS = {
     "ksp_type": "fgmres",
     "ksp_rtol": "1e-3",
-    "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (CONVENTIONS 7)
+    "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (docs/conventions.md §7)
     "snes_linesearch_type": "basic",
 }
 # inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart()

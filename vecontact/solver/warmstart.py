@@ -132,7 +132,7 @@ def bearing_guess(op, area_min, area_max, tol, area=None):
     """Cold-start gap (nondimensional) of a rigid flat at the height that cuts the fraction ``area``
     of the surface: g^ = max(delta - h^, 0), delta by bisection to ``tol`` (h_rms).  Default ``area``:
     Persson's estimate erf(sqrt(2) (1 - nu^2) sigma0 / X) with X^2 = sum_q |q|^2 |E(q_x v)|^2 |h_q|^2 (the
-    grid version of E0 xi(v) of CONVENTIONS section 5), clipped to [area_min, area_max]."""
+    grid version of E0 xi(v) of docs/conventions.md §5), clipped to [area_min, area_max]."""
     import math
     fft = op.fft
     N = op.N
