@@ -43,6 +43,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from statistics import median
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
     os.environ[_v] = "1"
@@ -57,21 +58,6 @@ TARGETS = dict(speedup_vs_fastest_peer_min_N_ge_2048=5.0, pairs_ratio_vs_best_pe
 PEER_NAMES = dict(tamaas="Tamaas PKR", cm="ContactMech CCG")
 
 
-def _median(xs):
-    xs = sorted(xs)
-    n = len(xs)
-    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
-
-
-def _erfinv(y):
-    lo, hi = 0.0, 10.0
-    for _ in range(200):
-        m = 0.5 * (lo + hi)
-        if math.erf(m) < y:
-            lo = m
-        else:
-            hi = m
-    return 0.5 * (lo + hi)
 
 
 # ----------------------------------------------------------------------------- the peers' process
@@ -214,7 +200,7 @@ class Vecontact:
             self.fft.apply(a, m, a)
             ts.append(time.perf_counter() - t)
         del a, m
-        return dict(median=_median(ts), min=min(ts))
+        return dict(median=median(ts), min=min(ts))
 
     def solve(self, sigma0, tol):
         r = self.solve_contact(self.fft, self.L, self.h, self.el, 0.0, sigma0, tolerance=tol,
@@ -226,18 +212,19 @@ class Vecontact:
 
     def calibrate(self, area, steps):
         """sigma0 (Pa) aimed at A/A0 = area: Persson's theory, then erf-inverse fine-grid corrections."""
+        from scipy.special import erfinv
         from vecontact.physics.theory import persson
         th = persson(self.spec, self.el, [0.0], [1.0])
         s = 2.0 * math.sqrt(float(th.G_q[0, 0, -1]))      # theory: A/A0 = erf(sigma0 / s)
-        sig = s * _erfinv(area)
+        sig = s * erfinv(area)
         hist = []
         for _ in range(steps):
             r = self.solve(sig, 1e-6)
             hist.append((sig, r["area"]))
             if not (0 < r["area"] < 1):
                 break
-            s = sig / _erfinv(r["area"])
-            sig = s * _erfinv(area)
+            s = sig / erfinv(r["area"])
+            sig = s * erfinv(area)
         return sig, hist
 
 

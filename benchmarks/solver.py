@@ -34,29 +34,13 @@ import os
 import subprocess
 import sys
 import time
+from statistics import median
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 Q0 = 2.5e5
 
 
-def _erfinv(y):
-    lo, hi = 0.0, 10.0
-    for _ in range(200):
-        m = 0.5 * (lo + hi)
-        if math.erf(m) < y:
-            lo = m
-        else:
-            hi = m
-    return 0.5 * (lo + hi)
-
-
-def _median(xs):
-    xs = sorted(xs)
-    n = len(xs)
-    if n == 0:
-        return float("nan")
-    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
 
 
 # ------------------------------------------------------------------------------------------ worker
@@ -64,6 +48,7 @@ def worker(args):
     sys.path.insert(0, ROOT)
     import numpy as np
     from mpi4py import MPI
+    from scipy.special import erfinv
     from vecontact.core.pfft import SlabFFT
     from vecontact.core.surface import generate
     from vecontact.physics.modulus import Elastic, HavriliakNegami
@@ -98,7 +83,7 @@ def worker(args):
         fft.apply(a, mult, a)
         comm.Barrier()
         reps.append(time.perf_counter() - t)
-    t_pair = comm.bcast(_median(reps), root=0)
+    t_pair = comm.bcast(median(reps), root=0)
     del a, mult
 
     # coarse copy of the surface (N/4 holds all the roughness) for the pressure calibration
@@ -114,13 +99,13 @@ def worker(args):
         th = persson(spec, mod, [v], [1.0])
         G1 = float(th.G_q[0, 0, -1])
         s = 2.0 * math.sqrt(G1)        # theory: A = erf(sigma / s)
-        sig = s * _erfinv(area)
+        sig = s * erfinv(area)
         for _ in range(args.calib_steps):
             rc = solve_contact(fc, L, hc, mod, v, sig, tolerance=1e-4, store=())
             if not (0 < rc.area < 1):
                 break
-            s = sig / _erfinv(rc.area)
-            sig = s * _erfinv(area)
+            s = sig / erfinv(rc.area)
+            sig = s * erfinv(area)
         return sig
 
     emit(dict(kind="fft", N=N, ranks=comm.size, t_pair=t_pair, t_setup=t_setup))
@@ -198,7 +183,7 @@ def main():
         sizes = [int(x) for x in args.sizes.split(",")]
     else:
         sizes = [n for n in (512, 1024, 2048, 4096) if args.min_n <= n <= args.max_n]
-    records = []
+    records, failed = [], []
     env = dict(os.environ)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     env.setdefault("OMP_NUM_THREADS", "1")
@@ -233,10 +218,16 @@ def main():
                     with open(args.out, "a") as fh:
                         fh.write(json.dumps(rec) + "\n")
                 _print_row(rec)
-        if proc.returncode not in (0, None):
+        if proc.returncode != 0:
+            failed.append(N)
             print(f"# N={N}: worker failed ({proc.returncode}):\n{err[-3000:]}", flush=True)
         print(f"# N={N} done in {time.time() - t:.0f} s", flush=True)
-    print(json.dumps(summarise(records)))
+    summary = summarise(records)
+    summary["workers_failed"] = failed
+    summary["all_converged"] = summary["all_converged"] and not failed
+    print(json.dumps(summary))
+    if failed:          # a crashed or timed-out size is not a measurement
+        raise SystemExit(1)
 
 
 def _print_row(r):
@@ -277,15 +268,15 @@ def summarise(records):
     s4096 = [r["seconds"] for r in sn if r["N"] == 4096 and abs(r["target"] - 0.05) < 1e-9 and r["ranks"] == 2]
     out = dict(
         pk_ratio_max=max(ratios) if ratios else None,
-        pk_ratio_median=_median(ratios) if ratios else None,
+        pk_ratio_median=median(ratios) if ratios else None,
         pk_iter_ratio_max=max(iratios) if iratios else None,
         pairs_growth=max(growth) if growth else None,
         pairs_growth_sizes=[sizes[0], sizes[-1]] if sizes else None,
         time_per_pair_ratio=max(tpp) if tpp else None,
-        time_per_pair_ratio_median=_median(tpp) if tpp else None,
+        time_per_pair_ratio_median=median(tpp) if tpp else None,
         seconds_4096=max(s4096) if s4096 else None,
         overhead_max=max(r["overhead"] for r in sn) if sn else None,
-        overhead_median=_median([r["overhead"] for r in sn]) if sn else None,
+        overhead_median=median([r["overhead"] for r in sn]) if sn else None,
         all_converged=all(r["converged"] for r in records if r["kind"] in ("snes", "pk"))
         and all(r["oracle_converged"] for r in sn),
         targets=dict(pk_ratio_max=0.5, pairs_growth=1.5, time_per_pair_ratio=1.3, seconds_4096=60, overhead_max=2),

@@ -50,6 +50,7 @@ def test_five_line_script_of_the_docs_runs():
     text = open(os.path.join(ROOT, "docs", "api.md")).read()
     script = re.search(r"```python\n(.*?)```", text, re.S).group(1)
     assert len(script.strip().splitlines()) == 5
+    assert script in open(os.path.join(ROOT, "README.md")).read()      # the README shows the same script
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, env=ENV,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -211,7 +212,10 @@ def test_run_and_read_results_with_and_without_pandas(tmp_path, monkeypatch):
         vc.read_results(job["output"], as_frame=True)
     monkeypatch.undo()
     paths = vc.plot_results(job["output"], str(tmp_path / "figs"))
-    assert len(paths) == 4 and all(os.path.getsize(p) > 0 for p in paths)
+    names = sorted(os.path.basename(p) for p in paths)      # no maps file: every figure but Fig. 3
+    assert names == ["fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png",
+                     "gamma_sensitivity.png", "morphology.png", "morphology_vs_v.png", "theory_error.png"]
+    assert all(os.path.getsize(p) > 0 for p in paths)
 
 
 def test_load_job_and_make_job_agree(tmp_path, monkeypatch):
