@@ -69,6 +69,7 @@ def test_plot_and_report_commands(study_files):
     assert len(rows["gamma"]) >= q1v                                     # (q1, v, occupied A/A0 band)
     assert rows["convergence"][0][2:5] == ["12", "12", "0"]   # 2 seeds x 2 v x 3 p, all converged
     assert rows["seeds"][1][2:4] == ["1, 2", "1, 2"]
+    assert {r[2] for r in rows["collapse"]} == {"2"}                      # q1 with results, per row
     assert "no common" not in text and "—" not in str(rows["area_vs_v"])
     # the cost table is sum(seconds x ranks) / 3600 of the file's rows
     with h5py.File(d / "out.h5", "r") as f:
@@ -107,6 +108,7 @@ def test_partial_file(study_files, tmp_path):
     assert rows["seeds"][0][3] == "1, 2" and rows["seeds"][1][3] == "none"
     assert "q1 = 16 q0: no converged numerical cases in this file yet" in open(out).read()
     assert len(rows["peak"]) == 2 and len(rows["kappa"]) == 2
+    assert {r[2] for r in rows["collapse"]} == {"1"}
     p = vecontact(0, ["plot", path, "-o", str(tmp_path / "figs")], cwd=tmp_path, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stdout.splitlines()[-1] == f"vecontact: {MAPS_SKIPPED}"
@@ -114,6 +116,22 @@ def test_partial_file(study_files, tmp_path):
     assert [os.path.basename(f) for f in figs] == [f for f in PAPER_FIGURES + BEYOND_FIGURES if "fig3" not in f]
     assert sorted(os.listdir(tmp_path / "figs")) == sorted(os.path.basename(f) for f in figs)
     assert all(_is_png(f) for f in figs)
+
+
+def test_collapse_rows_count_their_own_q1(study_files, tmp_path):
+    """A velocity not yet solved at one q1: its collapse rows count the q1 that have it, not every q1."""
+    path = str(tmp_path / "partial.h5")
+    shutil.copy(study_files / "out.h5", path)
+    with h5py.File(path, "r+") as f:
+        cases = f["cases"][()]
+        fast = (cases["q1"] == cases["q1"].max()) & (cases["velocity"] == cases["velocity"].max())
+        del f["cases"]
+        f["cases"] = cases[~fast]
+        del f["diagnostics"]
+    rows = _tables(open(write_report(path, out=str(tmp_path / "n.md"))).read())
+    vmax = f"{float(cases['velocity'].max()):g} m/s"
+    for r in rows["collapse"]:
+        assert r[2] == ("1" if r[1] == vmax else "2"), r
 
 
 def test_inset_window_is_around_a_large_patch():

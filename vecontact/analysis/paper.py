@@ -154,14 +154,16 @@ def abscissa(study, points, scale):
 def collapse(study, velocities=None):
     """Scatter of ln A/A0 around one fitted curve (curves.collapse_scatter) in the Fig. 4 and Fig. 5
     abscissas, for the numerics and for the theory at the same pressures, over the given velocities
-    (default: all) and every q1 with results. Returns {scale: (numerics, theory, points)}."""
+    (default: all) and every q1 with results. Returns {scale: (numerics, theory, points, q1 values)}:
+    the last two count the seed-mean points and the distinct q1 of this group."""
     pts = study.points()
     if velocities is not None:
         pts = pts[np.isin(pts["velocity"], velocities)]
     out = {}
     for scale in ("slope", "xi"):
         x = abscissa(study, pts, scale)
-        out[scale] = (collapse_scatter(x, pts["area"]), collapse_scatter(x, pts["theory_area"]), len(pts))
+        out[scale] = (collapse_scatter(x, pts["area"]), collapse_scatter(x, pts["theory_area"]), len(pts),
+                      len(np.unique(pts["q1"])))
     return out
 
 
@@ -170,11 +172,10 @@ def collapse_table(study):
               ["abscissa", "velocities", "q1 with results", "points", "scatter (numerics)", "scatter (theory)"])
     names = {"slope": "σ0/(E0 h'_rms) (Fig. 4)", "xi": "σ0/(E0 ξ) (Fig. 5)"}
     groups = [("all", None)] + [(f"{v:g} m/s", [v]) for v in study.velocities]
-    nq = str(len(study.q1_with_results()))
     for scale in ("slope", "xi"):
         for label, vs in groups:
-            s_num, s_th, n = collapse(study, vs)[scale]
-            t.rows.append([names[scale], label, nq, str(n), num(s_num), num(s_th)])
+            s_num, s_th, n, nq = collapse(study, vs)[scale]
+            t.rows.append([names[scale], label, str(nq), str(n), num(s_num), num(s_th)])
     t.notes = ["Fit: one curve A = erf(exp(P(ln x))) through all the seed-mean points of the group (every q1 "
                "with results), P a least-squares cubic in ln x fitted to ln erfinv(A/A0) "
                "(vecontact.analysis.curves); scatter = rms of ln A - ln A_fit (≈ rms relative deviation). "
