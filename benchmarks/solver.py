@@ -33,6 +33,8 @@ import math
 import os
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from statistics import median
 
@@ -203,21 +205,26 @@ def main():
             cmd.append("--no-pk")
         print(f"# N={N} on {ranks} ranks ...", flush=True)
         t = time.time()
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
-        try:
-            out, err = proc.communicate(timeout=args.timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, err = proc.communicate()
-            print(f"# N={N}: TIMEOUT after {args.timeout:.0f} s", flush=True)
-        for line in out.splitlines():
-            if line.startswith("RESULT "):
-                rec = json.loads(line[7:])
-                records.append(rec)
-                if args.out:
-                    with open(args.out, "a") as fh:
-                        fh.write(json.dumps(rec) + "\n")
-                _print_row(rec)
+        # each case's row as soon as the worker prints it (a 2048^2 run takes many minutes);
+        # stderr to a file so that a full pipe cannot stall the worker
+        with tempfile.TemporaryFile("w+") as errf:
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=errf, text=True, env=env, cwd=ROOT)
+            timer = threading.Timer(args.timeout, proc.kill)
+            timer.start()
+            for line in proc.stdout:
+                if line.startswith("RESULT "):
+                    rec = json.loads(line[7:])
+                    records.append(rec)
+                    if args.out:
+                        with open(args.out, "a") as fh:
+                            fh.write(json.dumps(rec) + "\n")
+                    _print_row(rec)
+            proc.wait()
+            if not timer.is_alive():
+                print(f"# N={N}: TIMEOUT after {args.timeout:.0f} s", flush=True)
+            timer.cancel()
+            errf.seek(0)
+            err = errf.read()
         if proc.returncode != 0:
             failed.append(N)
             print(f"# N={N}: worker failed ({proc.returncode}):\n{err[-3000:]}", flush=True)
