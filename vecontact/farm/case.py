@@ -60,21 +60,23 @@ def solve_case(group, fft, heights, case, theory, setup, warm=None):
     contact = gather_rows(group, fft, (res.pressure > 0).astype(np.uint8))
     morphology = contact_morphology(contact, setup.L / fft.N) if group.rank == 0 else None
     row = solved_row(theory, res, fft.N, group.size, morphology)
-    link = write_fields(group, fft, case, res, row, setup) if setup.fields else None
+    link = write_fields(group, fft, case, res, row, setup, contact) if setup.fields else None
     return res, row, link
 
 
-def write_fields(group, fft, case, res, row, setup):
-    """Gather every k-th point of each requested field to the leader, which writes the file.
-    Returns the file's link on the leader, None elsewhere."""
+def write_fields(group, fft, case, res, row, setup, contact):
+    """Gather every k-th point of each requested field to the leader, which writes the file; the
+    contact map is the one already gathered for the morphology (``contact``, full resolution on the
+    leader). Returns the file's link on the leader, None elsewhere."""
     k = setup.downsample
     arrays = {}
     for name in setup.fields:
-        src = res.pressure if name == "contact" else getattr(res, name)
-        if src is None:
+        if name == "contact":
+            arrays[name] = contact[::k, ::k] if group.rank == 0 else None
             continue
-        src = (np.asarray(src) > 0).astype(np.uint8) if name == "contact" else np.asarray(src, np.float64)
-        arrays[name] = gather_rows(group, fft, src, k)
+        src = getattr(res, name)
+        if src is not None:
+            arrays[name] = gather_rows(group, fft, np.asarray(src, np.float64), k)
     if group.rank != 0:
         return None
     attrs = {"q1": case.q1, "seed": case.seed, "velocity": case.velocity, "pressure": case.pressure,
