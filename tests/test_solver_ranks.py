@@ -12,6 +12,7 @@ Tolerances: area within one grid point; pressure fields to 1e-6 sigma0 and gap f
 """
 import json
 import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -59,3 +60,17 @@ def test_rank_independence(N, method, model):
         else:
             assert abs(r["mu"]) <= 1e-14
         assert abs(r["mu_geometric"] - base["mu_geometric"]) <= 1e-5 * max(abs(base["mu_geometric"]), 1e-3), n
+
+
+def test_no_deadlock_when_ranks_free_petsc_objects_at_different_times():
+    """A PETSc object on the solver's communicator alive on one rank only between two solves (as after
+    a garbage collection that ran on one rank): the second solve must not deadlock (solver.snes.hold_comm)."""
+    script = os.path.join(os.path.dirname(SCRIPT), "petsc_comm_case.py")
+    try:
+        proc = run_mpi(2, [script], timeout=90)
+    except subprocess.TimeoutExpired:
+        pytest.fail("2-rank solve deadlocked after a rank-dependent PETSc object destruction")
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("OK ")]
+    assert line, proc.stdout + proc.stderr
+    _, a1, a2, conv = line[0].split()
+    assert conv == "True" and a1 == a2 and 0 < float(a1) < 1, line[0]

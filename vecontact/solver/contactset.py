@@ -368,10 +368,11 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
 
     Returns dict(iterations, pairs (FFT pairs of the grid of ``op``, set-up included), residual (the
     inner solve's final residual norm, h_rms), converged)."""
-    from vecontact.solver.snes import petsc
+    from vecontact.solver.snes import hold_comm, petsc
     PETSc = petsc()
     fft = op.fft
     comm = fft.comm
+    hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
     step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, recycle_vectors=0))

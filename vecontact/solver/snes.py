@@ -37,9 +37,10 @@ from vecontact.solver.policy import StepPolicy, choose_step
 from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PETSC_VI_DEFAULTS
 from vecontact.solver.vi import ViNewton
 
-__all__ = ["ncp_solve", "petsc", "POLICY_OFF"]
+__all__ = ["ncp_solve", "petsc", "hold_comm", "POLICY_OFF"]
 
 _PETSC = None
+_ANCHORS = {}
 
 # PETSc options with which the user, not StepPolicy, sets the Newton steps' Krylov tolerances
 POLICY_OFF = ("snes_ksp_ew", "ksp_rtol", "ksp_atol", "ksp_max_it",
@@ -53,6 +54,17 @@ def petsc():
         from petsc4py import PETSc
         _PETSC = PETSc
     return _PETSC
+
+
+def hold_comm(comm):
+    """Keep one PETSc object on ``comm`` for the life of the process (collective on its first call).
+
+    PETSc duplicates a communicator (a collective call) when the first object on it is created and
+    frees the duplicate when the last one is destroyed.  Python destroys petsc4py objects at
+    rank-dependent times, so one rank could duplicate again while the other still held an object: a
+    2-rank deadlock (2048^2 benchmark).  With this anchor the duplicate is made once."""
+    if comm.size > 1 and id(comm) not in _ANCHORS:
+        _ANCHORS[id(comm)] = (comm, petsc().Vec().createMPI((1, comm.size), comm=comm))
 
 
 def _reason_name(cls, value):
@@ -201,6 +213,7 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     defaults = dict(PETSC_DEFAULTS, ksp_gmres_restart=str(restart))
     if vi:
         defaults.update(PETSC_VI_DEFAULTS, ksp_max_it=str(settings.ksp_max_it))
+    hold_comm(comm)
     _COUNTER[0] += 1
     prefix = f"vecontact{_COUNTER[0]}_"
     state = NewtonState(op)
