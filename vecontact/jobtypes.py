@@ -92,37 +92,39 @@ def _plain(value, memo):
     return value
 
 
-def _from(cls, d, memo):
-    """A section from its resolved dict; keys this version does not store (``grid``: derived) are
-    skipped, missing ones take the defaults (results files of older versions)."""
-    names = {f.name for f in fields(cls) if f.init}
-    kw = {}
-    for key, value in d.items():
-        name = _ATTRIBUTE.get(key, key)
-        if name in names:
-            kw[name] = _frozen(value, memo)
-    return cls(**kw)
+class _Section:
+    """A section of the job. Its resolved dict holds :meth:`stored_keys` in order (``length`` is the
+    attribute ``period``; ``grid`` is derived, :meth:`Surface.grids`); a key of ``_ONLY_WITH_VALUE``
+    only when it has a value. ``memo``: shared by the sections of one job (see :func:`_frozen`)."""
 
+    def stored_keys(self):
+        """The keys of this section's resolved dict, in their stored order."""
+        return tuple(f.name for f in fields(self) if f.init)
 
-def _to(section, keys, memo):
-    """The resolved dict of a section: ``keys`` in order, ``_ONLY_WITH_VALUE`` keys only if set."""
-    out = {}
-    for key in keys:
-        value = section.grids() if key == "grid" else getattr(section, _ATTRIBUTE.get(key, key))
-        if value is None and key in _ONLY_WITH_VALUE:
-            continue
-        out[key] = _plain(value, memo)
-    return out
+    def to_dict(self, memo=None):
+        """The section's resolved dict."""
+        memo = {} if memo is None else memo
+        out = {}
+        for key in self.stored_keys():
+            value = self.grids() if key == "grid" else getattr(self, _ATTRIBUTE.get(key, key))
+            if value is not None or key not in _ONLY_WITH_VALUE:
+                out[key] = _plain(value, memo)
+        return out
 
-
-def _field_keys(cls):
-    return tuple(f.name for f in fields(cls) if f.init)
+    @classmethod
+    def from_dict(cls, d, memo=None):
+        """The section from its resolved dict; keys it does not hold (``grid``: derived) are skipped,
+        missing ones take the defaults (results files of earlier versions)."""
+        memo = {} if memo is None else memo
+        names = {f.name for f in fields(cls) if f.init}
+        given = {_ATTRIBUTE.get(k, k): v for k, v in d.items()}
+        return cls(**{name: _frozen(v, memo) for name, v in given.items() if name in names})
 
 
 # --------------------------------------------------------------------------------------------
 # the sections
 @dataclass(frozen=True)
-class Surface:
+class Surface(_Section):
     """The rough substrate: its spectrum and the realisations solved on (``surface`` section).
 
     ``spectrum`` decides which fields apply: self-affine (q0, qr, q1, hurst, C0 or hrms), psd (a
@@ -140,10 +142,10 @@ class Surface:
     seeds: Union[tuple, dict] = (1,)            # realisations: one tuple, or {repr(q1): tuple}; see realisations()
     file: Optional[str] = None                  # absolute path of the C(q) table (psd) or height file (file)
     dataset: Optional[str] = None               # HDF5 dataset or instrument channel of the height file
-    period: Optional[float] = None              # key "length" (m): the height file's period, or the psd system's side
+    period: Optional[float] = None              # key "length" (m): a height file's period, the psd system's side
     source: Optional[dict] = None               # provenance of an instrument scan (format, channel, crop...)
     dimension: Optional[int] = None             # psd: 2 for C(q) in m^4, 1 for a line-scan C1D(q) in m^3
-    columns: Optional[tuple] = None             # psd: the table's (q, C) columns (indices or names), None: the first two
+    columns: Optional[tuple] = None             # psd: the table's (q, C) columns (index or name), None: first two
     sha256: Optional[str] = None                # psd: SHA-256 of the table file
     table: Optional[dict] = None                # psd: rows, q_min, q_max (1/m), hrms (m) of the table
 
@@ -168,16 +170,12 @@ class Surface:
         """The surface realisations (seeds, a tuple of int) at cut-off q1 (1/m)."""
         return self.seeds if isinstance(self.seeds, tuple) else self.seeds[repr(float(q1))]
 
-    def to_dict(self, memo=None):
-        return _to(self, SURFACE_KEYS[self.spectrum], {} if memo is None else memo)
-
-    @classmethod
-    def from_dict(cls, d, memo=None):
-        return _from(cls, d, {} if memo is None else memo)
+    def stored_keys(self):
+        return SURFACE_KEYS[self.spectrum]
 
 
 @dataclass(frozen=True)
-class Material:
+class Material(_Section):
     """The rubber's linear viscoelastic modulus E(omega) (``material`` section; docs/conventions.md
     §3). ``model`` decides which fields apply (see :data:`MATERIAL_KEYS`)."""
     model: str = "elastic"                      # elastic, sls, prony, havriliak-negami or table
@@ -204,13 +202,8 @@ class Material:
             self._cache["modulus"] = make_modulus(self.to_dict())
         return self._cache["modulus"]
 
-    def to_dict(self, memo=None):
-        keys = MATERIAL_KEYS.get(self.model, _field_keys(Material))
-        return _to(self, keys, {} if memo is None else memo)
-
-    @classmethod
-    def from_dict(cls, d, memo=None):
-        return _from(cls, d, {} if memo is None else memo)
+    def stored_keys(self):
+        return MATERIAL_KEYS.get(self.model) or super().stored_keys()
 
 
 @dataclass(frozen=True)
@@ -223,7 +216,7 @@ class AreaRange:
 
 
 @dataclass(frozen=True)
-class Sweep:
+class Sweep(_Section):
     """The sliding velocities and nominal pressures of the cases (``sweep`` section)."""
     velocity: tuple = ()                        # sliding velocities v (m/s), sorted
     pressure: Union[tuple, AreaRange] = ()      # nominal pressures sigma0 (Pa), or an AreaRange
@@ -244,22 +237,15 @@ class Sweep:
 
 
 @dataclass(frozen=True)
-class Theory:
+class Theory(_Section):
     """Persson's theory: S(q) and the quadrature (``theory`` section; docs/conventions.md §5)."""
     gamma: float = 0.5                          # S(q) = gamma + (1 - gamma) P(q)^2 (dimensionless)
     nq: Optional[int] = None                    # wavevector nodes per decade, None: the converged default
     nphi: Optional[int] = None                  # angular nodes on [0, pi/2], None: the converged default
 
-    def to_dict(self, memo=None):
-        return _to(self, _field_keys(Theory), {} if memo is None else memo)
-
-    @classmethod
-    def from_dict(cls, d, memo=None):
-        return _from(cls, d, {} if memo is None else memo)
-
 
 @dataclass(frozen=True)
-class Numerics:
+class Numerics(_Section):
     """The exact solver and what it stores (``numerics`` section; docs/solver.md)."""
     enabled: bool = False                       # solve every case numerically (else: theory only)
     solver: str = "snes"                        # snes (any material) or pk (Polonsky-Keer, elastic only)
@@ -271,13 +257,6 @@ class Numerics:
     coarse: bool = True                         # coarse-grid start of each solve
     max_iterations: Optional[int] = None        # Newton steps at most, None: the solver's default
     threads: int = 1                            # FFTW threads per rank
-
-    def to_dict(self, memo=None):
-        return _to(self, _field_keys(Numerics), {} if memo is None else memo)
-
-    @classmethod
-    def from_dict(cls, d, memo=None):
-        return _from(cls, d, {} if memo is None else memo)
 
 
 _SECTIONS = (("surface", Surface), ("material", Material), ("sweep", Sweep), ("theory", Theory),
