@@ -195,7 +195,7 @@ def test_coverage_warning_from_theory(tmp_path):
 def test_run_and_read_results_with_and_without_pandas(tmp_path, monkeypatch):
     job = small_job(tmp_path, enabled=True)
     assert vc.run(job) == str(tmp_path / "out.h5")
-    cases = vc.read_results(job["output"], as_frame=False)
+    cases = vc.read_results(job.output, as_frame=False)
     assert cases.dtype.names[:4] == ("q1", "seed", "velocity", "pressure") and len(cases) == 4
     assert np.all(cases["status"] == 1)
     s = vc.surface(job)
@@ -203,15 +203,15 @@ def test_run_and_read_results_with_and_without_pandas(tmp_path, monkeypatch):
     row = cases[(cases["velocity"] == 1.0) & (cases["pressure"] == 3e5)][0]
     assert abs(row["area"] - r.area) <= 1.0 / 64 ** 2 and row["mu"] == pytest.approx(r.mu, rel=1e-6)
     pd = pytest.importorskip("pandas")
-    df = vc.read_results(job["output"])
+    df = vc.read_results(job.output)
     assert isinstance(df, pd.DataFrame) and df.attrs["units"]["pressure"] == "Pa"
     assert np.array_equal(df["mu"].to_numpy(), cases["mu"])
     monkeypatch.setitem(sys.modules, "pandas", None)             # pandas not installed
-    assert isinstance(vc.read_results(job["output"]), np.ndarray)
+    assert isinstance(vc.read_results(job.output), np.ndarray)
     with pytest.raises(InputError, match="pandas is not installed"):
-        vc.read_results(job["output"], as_frame=True)
+        vc.read_results(job.output, as_frame=True)
     monkeypatch.undo()
-    paths = vc.plot_results(job["output"], str(tmp_path / "figs"))
+    paths = vc.plot_results(job.output, str(tmp_path / "figs"))
     names = sorted(os.path.basename(p) for p in paths)      # no maps file: every figure but Fig. 3
     assert names == ["fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png",
                      "gamma_sensitivity.png", "morphology.png", "morphology_vs_v.png", "theory_error.png"]
@@ -226,4 +226,5 @@ def test_load_job_and_make_job_agree(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     a = vc.load_job("job.yaml")
     b = vc.make_job(**{k: v for k, v in raw.items()})
-    assert a == b and isinstance(a, dict) and a["output"] == str(tmp_path / "out.h5")
+    assert a == b and isinstance(a, vc.Job) and a.output == str(tmp_path / "out.h5")
+    assert a.to_dict() == b.to_dict() and vc.run(a.to_dict()) == a.output        # the resolved dict is a job too

@@ -474,10 +474,11 @@ def test_not_converged_recorded_and_fields(tmp_path):
 
 
 def test_petsc_options_command_line_wins():
-    job = {"numerics": {"petsc": {"snes_type": "newtonls", "ksp_rtol": "0.1"}}}
+    from vecontact.jobtypes import Job, Numerics
+    job = Job.from_dict({"numerics": {"petsc": {"snes_type": "newtonls", "ksp_rtol": "0.1"}}})
     got = petsc_options(job, ["-snes_type", "vinewtonrsls", "-snes_monitor"])
     assert got == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.1", "snes_monitor": None}
-    assert petsc_options(job, ()) == job["numerics"]["petsc"]
+    assert petsc_options(job, ()) == job.numerics.petsc and isinstance(job.numerics, Numerics)
 
 
 def test_morphology_columns_are_those_of_the_contact_map(tmp_path):

@@ -20,7 +20,7 @@ from vecontact import job as jobs
 from vecontact.errors import InputError
 from vecontact.io.psd import read_psd
 from vecontact.io.tables import read_columns
-from vecontact.physics.modulus import HavriliakNegami, Table, coverage, make_modulus
+from vecontact.physics.modulus import HavriliakNegami, Table, coverage
 from vecontact.physics.spectrum import SelfAffine, Tabulated, isotropic_from_line, line_psd
 from vecontact.physics.theory import persson
 
@@ -129,12 +129,12 @@ def test_psd_job_system_size_and_grid(tmp_path):
     raw = {"output": "o.h5", "surface": {"spectrum": "psd", "file": "C.csv", "null_band": 2},
            "material": MATERIAL, "sweep": {"velocity": [0.01], "pressure": [1e5]}}
     job = jobs.resolve(copy.deepcopy(raw), str(tmp_path))
-    s = job["surface"]
-    assert s["length"] == pytest.approx(2 * math.pi / Q0, rel=1e-15) and s["q1"] == [32 * Q0]
-    assert s["grid"] == {repr(32 * Q0): 128}                      # 2 null_band q1 / q0 = 128
+    s = job.surface
+    assert s.length == pytest.approx(2 * math.pi / Q0, rel=1e-15) and s.q1 == (32 * Q0,)
+    assert s.grids() == {repr(32 * Q0): 128}                      # 2 null_band q1 / q0 = 128
     raw["surface"].update(q1=[10 * Q0], length=2 * math.pi / (2 * Q0))
     job = jobs.resolve(copy.deepcopy(raw), str(tmp_path))
-    assert job["surface"]["grid"] == {repr(10 * Q0): 20}          # 2 * 2 * 10 / 2 = 20 -> 5 * 4
+    assert job.surface.grids() == {repr(10 * Q0): 20}             # 2 * 2 * 10 / 2 = 20 -> 5 * 4
     assert [jobs.fft_size(n) for n in (3, 4, 7, 100, 129, 1000, 1025)] == [4, 4, 8, 128, 160, 1024, 1280]
     from vecontact.runner import spectra
     from mpi4py import MPI
@@ -279,7 +279,7 @@ def test_dma_csv_in_hz_and_mpa_with_wlf_and_vertical_shift(tmp_path):
     job = jobs.resolve({"output": "o.h5", "surface": {"spectrum": "self-affine", "q0": Q0, "q1": [4 * Q0],
                                                       "hurst": 0.8, "C0": 1e-28},
                         "material": material, "sweep": {"velocity": [0.01], "pressure": [1e5]}}, str(tmp_path))
-    E = make_modulus(job["material"])
+    E = job.material.modulus()
     aT = 10 ** (-8.86 * 15 / 116.6)
     assert isinstance(E, Table) and E.aT == pytest.approx(aT, rel=1e-14)
     # at the rows (omega = 2 pi f / aT at temperature T): exact up to the 17-digit rounding

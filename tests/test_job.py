@@ -95,13 +95,13 @@ def test_unknown_top_level_and_type_errors():
 
 def test_resolved_defaults_and_grid():
     job = jobs.resolve(copy.deepcopy(GOOD), ROOT)
-    assert job["surface"]["grid"] == {repr(2.0e6): 64, repr(4.0e6): 128}    # N = 2 nb q1/q0
-    assert job["numerics"]["tolerance"] == 1e-8
-    assert job["sweep"]["pressure"] == pytest.approx([1e4, 1e5, 1e6], rel=1e-12)
-    assert job["output"] == os.path.join(ROOT, "out.h5")
+    assert job.surface.grids() == {repr(2.0e6): 64, repr(4.0e6): 128}    # N = 2 nb q1/q0
+    assert job.numerics.tolerance == 1e-8
+    assert job.sweep.pressure == pytest.approx((1e4, 1e5, 1e6), rel=1e-12)
+    assert job.output == os.path.join(ROOT, "out.h5")
     # a numeric string (YAML reads 1e4 without a dot as a string) is accepted
     job2 = jobs.resolve(_bad("sweep.pressure", ["1e4"]), ROOT)
-    assert job2["sweep"]["pressure"] == [1e4]
+    assert job2.sweep.pressure == (1e4,)
 
 
 def test_hrms_normalises_largest_q1():
@@ -127,25 +127,24 @@ def test_seeds_per_q1():
     from vecontact.runner import spectra
     from mpi4py import MPI
     job = jobs.resolve(_bad("surface.seeds", {"other": [1, 2, 3], 4.0e6: [7]}), ROOT)
-    assert jobs.seeds_for(job["surface"], 2.0e6) == [1, 2, 3] and jobs.seeds_for(job["surface"], 4.0e6) == [7]
+    assert job.surface.realisations(2.0e6) == (1, 2, 3) and job.surface.realisations(4.0e6) == (7,)
     cs = sweep.expand(job, spectra(job, MPI.COMM_SELF))
     per_q1 = {q1: sorted({c.seed for c in cs if c.q1 == q1}) for q1 in (2.0e6, 4.0e6)}
     assert per_q1 == {2.0e6: [1, 2, 3], 4.0e6: [7]}
     assert len(cs) == (3 + 1) * 2 * 3                   # seeds x velocities x pressures
     # YAML reads 4e6 as a string and 4.0e+6 as a number: both name q1 = 4e6
     for key in ("4e6", 4.0e6):
-        assert jobs.seeds_for(jobs.resolve(_bad("surface.seeds", {"other": [1], key: [5]}), ROOT)["surface"],
-                              4.0e6) == [5]
+        assert jobs.resolve(_bad("surface.seeds", {"other": [1], key: [5]}), ROOT).surface.realisations(4.0e6) == (5,)
     flat = jobs.resolve(copy.deepcopy(GOOD), ROOT)
-    assert jobs.seeds_for(flat["surface"], 4.0e6) == [1, 2]
+    assert flat.surface.realisations(4.0e6) == (1, 2)
     assert jobs.physics_hash(flat) == jobs.physics_hash(job)   # resuming with more seeds is allowed
 
 
 def test_petsc_options_forms():
     a = jobs.resolve(_bad("numerics.petsc", {"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3}), ROOT)
     b = jobs.resolve(_bad("numerics.petsc", "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor"), ROOT)
-    assert a["numerics"]["petsc"] == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001"}
-    assert b["numerics"]["petsc"] == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None}
+    assert a.numerics.petsc == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001"}
+    assert b.numerics.petsc == {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None}
 
 
 @pytest.mark.parametrize("change,key", BAD[:14], ids=[str(c[0]) for c, _ in BAD[:14]])
@@ -180,12 +179,12 @@ def test_shipped_jobs_are_valid():
         if name == "paper-small.yaml" and not os.path.exists(path):
             continue
         job = jobs.load(path)
-        assert job["material"]["model"] == "havriliak-negami"
+        assert job.material.model == "havriliak-negami"
     paper = jobs.load(os.path.join(ROOT, "jobs", "paper.yaml"))
-    q0 = paper["surface"]["q0"]
-    assert [q / q0 for q in paper["surface"]["q1"]] == [32, 64, 128, 256]
-    assert sorted(paper["surface"]["grid"].values()) == [512, 1024, 2048, 4096]
-    assert paper["sweep"]["velocity"] == [0.01, 0.1, 1.0, 10.0]
+    q0 = paper.surface.q0
+    assert [q / q0 for q in paper.surface.q1] == [32, 64, 128, 256]
+    assert [paper.surface.grid(q1) for q1 in paper.surface.q1] == [512, 1024, 2048, 4096]
+    assert paper.sweep.velocity == (0.01, 0.1, 1.0, 10.0)
 
 
 def test_paper_pressures_span_the_area_range():
@@ -197,8 +196,8 @@ def test_paper_pressures_span_the_area_range():
     psds = spectra(job, MPI.COMM_SELF)
     cs = sweep.expand(job, psds)
     rows, _ = sweep.theory(job, psds, cs)
-    for q1 in job["surface"]["q1"]:
-        for v in job["sweep"]["velocity"]:
+    for q1 in job.surface.q1:
+        for v in job.sweep.velocity:
             area = np.array([rows[c.key]["theory_area"] for c in cs
                              if c.q1 == q1 and c.velocity == v and c.seed == 1])
             assert len(area) == 12

@@ -10,7 +10,9 @@ import yaml
 from vecontact.io.results import ResultsFile, empty_row
 from vecontact.status import format_status, read_status
 
-JOB = {"surface": {"seeds": [1, 2], "grid": {repr(8e6): 512}}, "numerics": {"enabled": True}}
+# the stored (resolved) job, the parts status reads: the seeds, and q0, null_band for the grid N = 2 null_band q1 / q0
+JOB = {"surface": {"spectrum": "self-affine", "q0": 2.5e5, "q1": [8e6], "null_band": 8, "seeds": [1, 2],
+                   "grid": {repr(8e6): 512}}, "numerics": {"enabled": True}}
 
 
 def _sweep_file(path):

@@ -8,7 +8,7 @@ are loaded on first use, so ``import vecontact`` (and the command line) stays li
 """
 __version__ = "0.1.0"
 
-_API = ("load_job", "make_job", "run", "read_results", "plot_results", "surface", "read_topography",
+_API = ("load_job", "make_job", "Job", "run", "read_results", "plot_results", "surface", "read_topography",
         "read_psd", "self_affine", "modulus", "theory", "solve", "Surface", "Theory", "InputError",
         "InputWarning", "ConvergenceWarning", "REFERENCE_COMPOUND")
 

@@ -10,8 +10,9 @@ Five lines from a user's own scan and compound to Persson's theory and the exact
 
 Units are SI throughout: lengths and heights in m, wavevectors in 1/m, C(q) in m^4, moduli and
 pressures in Pa, velocities in m/s, frequencies in rad/s. Bad input raises :class:`InputError`
-(``.key``, ``.problem``), the same one-line messages the command line prints. Jobs are plain
-validated dicts (the resolved YAML job, as stored in every results file).
+(``.key``, ``.problem``), the same one-line messages the command line prints. Jobs are
+:class:`vecontact.jobtypes.Job` values (frozen; ``job.to_dict()`` is the resolved YAML job, as stored
+in every results file).
 """
 import math
 import os
@@ -22,8 +23,9 @@ import numpy as np
 
 from vecontact import job as jobs
 from vecontact.errors import InputError, InputWarning
+from vecontact.jobtypes import Job
 
-__all__ = ["load_job", "make_job", "run", "read_results", "plot_results", "surface", "read_topography",
+__all__ = ["load_job", "make_job", "Job", "run", "read_results", "plot_results", "surface", "read_topography",
            "read_psd", "self_affine", "modulus", "theory", "solve", "Surface", "Theory", "InputError",
            "InputWarning", "ConvergenceWarning", "REFERENCE_COMPOUND"]
 
@@ -39,15 +41,15 @@ class ConvergenceWarning(UserWarning):
 # ------------------------------------------------------------------------------------------------
 # jobs
 def load_job(path, output=None):
-    """Read and validate a YAML job file; returns the resolved job (a plain dict, every default
-    filled in, paths absolute). ``output`` overrides the job's results file."""
+    """Read and validate a YAML job file; returns the resolved :class:`~vecontact.jobtypes.Job`
+    (every default filled in, paths absolute). ``output`` overrides the job's results file."""
     return jobs.load(os.fspath(path), output=output)
 
 
 def make_job(*, output, surface, material, sweep, theory=None, numerics=None, base="."):
     """Validate a job given as its sections (dicts, the keys of the YAML job file); returns the
-    resolved job (a plain dict). Relative paths are relative to ``base`` (default: the current
-    folder)."""
+    resolved :class:`~vecontact.jobtypes.Job`. Relative paths are relative to ``base`` (default: the
+    current folder)."""
     raw = {"output": output, "surface": surface, "material": material, "sweep": sweep}
     raw.update({k: v for k, v in (("theory", theory), ("numerics", numerics)) if v is not None})
     if isinstance(output, str) and not os.path.isabs(output):
@@ -56,14 +58,17 @@ def make_job(*, output, surface, material, sweep, theory=None, numerics=None, ba
 
 
 def _job(job):
-    """A resolved job from a path or from load_job / make_job."""
+    """A resolved job from a path, from load_job / make_job, or a resolved job's dict (``to_dict()``,
+    a results file's ``job_yaml``)."""
     if isinstance(job, (str, os.PathLike)):
         return load_job(job)
+    if isinstance(job, Job):
+        return job
     resolved = (isinstance(job, dict) and isinstance(job.get("surface"), dict) and "seeds" in job["surface"]
                 and isinstance(job.get("numerics"), dict) and "enabled" in job["numerics"])
     if not resolved:
         raise InputError("job", "pass a job file path, or a job from vc.load_job or vc.make_job")
-    return job
+    return Job.from_dict(job)
 
 
 def run(job, comm=None, quiet=True, plot=False):
@@ -77,8 +82,8 @@ def run(job, comm=None, quiet=True, plot=False):
     comm = MPI.COMM_WORLD if comm is None else comm
     run_job(job, comm, quiet=quiet)
     if plot and comm.rank == 0:
-        plot_results(job["output"])
-    return job["output"]
+        plot_results(job.output)
+    return job.output
 
 
 def read_results(path, as_frame=None):
@@ -184,25 +189,23 @@ def surface(job, q1=None, seed=None):
     from vecontact.core.surface import generate
     from vecontact.runner import spectra
     job = _job(job)
-    s = job["surface"]
-    if s["spectrum"] == "file":
-        return read_topography(s["file"], s.get("dataset"),
-                               None if "source" in s else s["length"])
-    known = ", ".join(f"{x:g}" for x in s["q1"])
-    if q1 is None and len(s["q1"]) != 1:
+    s = job.surface
+    if s.spectrum == "file":
+        return read_topography(s.file, s.dataset, None if s.source is not None else s.length)
+    known = ", ".join(f"{x:g}" for x in s.q1)
+    if q1 is None and len(s.q1) != 1:
         raise InputError("q1", f"the job has several q1 ({known} 1/m): name one")
-    want = s["q1"][0] if q1 is None else jobs._number({"q1": q1}, "q1", "")
-    match = [x for x in s["q1"] if abs(x - want) <= 1e-9 * x]
+    want = s.q1[0] if q1 is None else jobs._number({"q1": q1}, "q1", "")
+    match = [x for x in s.q1 if abs(x - want) <= 1e-9 * x]
     if not match:
         raise InputError("q1", f"{want:g} is not one of the job's q1 ({known} 1/m)")
     q1 = match[0]
-    seed = jobs.seeds_for(s, q1)[0] if seed is None else jobs._number({"seed": seed}, "seed", "", lo=0,
-                                                                      integer=True)
+    seed = s.realisations(q1)[0] if seed is None else jobs._number({"seed": seed}, "seed", "", lo=0,
+                                                                   integer=True)
     psd = spectra(job, MPI.COMM_SELF, warn=False)[q1]
-    L = 2.0 * math.pi / s["q0"]
-    fft = SlabFFT(MPI.COMM_SELF, jobs.grid_size(job, q1))
-    h = generate(fft, L, psd, seed, amplitudes=s["amplitudes"])
-    return Surface(h, L, {"spectrum": s["spectrum"], "q1": q1, "seed": seed})
+    fft = SlabFFT(MPI.COMM_SELF, s.grid(q1))
+    h = generate(fft, s.length, psd, seed, amplitudes=s.amplitudes)
+    return Surface(h, s.length, {"spectrum": s.spectrum, "q1": q1, "seed": seed})
 
 
 def read_psd(path, dimension=2, columns=None):
@@ -254,8 +257,7 @@ def _as_modulus(model, params=None):
     if isinstance(model, dict) and not params:
         params = dict(model)
         model = params.pop("model", None)
-    from vecontact.physics.modulus import make_modulus
-    return make_modulus(jobs._material({"material": dict(params, model=model)}, os.getcwd()))
+    return jobs._material({"material": dict(params, model=model)}, os.getcwd()).modulus()
 
 
 def _spectrum(psd):

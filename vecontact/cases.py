@@ -8,9 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vecontact.job import seeds_for
+from vecontact.jobtypes import AreaRange
 from vecontact.physics import spectrum as spectra
-from vecontact.physics.modulus import make_modulus
 from vecontact.physics.theory import erf, persson
 from vecontact.rows import theory_row
 
@@ -37,30 +36,30 @@ class Case:
 
 def spectrum_for(job, q1):
     """The self-affine spectrum of the job at cut-off q1 (hrms normalises the largest q1)."""
-    s = job["surface"]
-    if "C0" in s:
-        return spectra.SelfAffine(s["q0"], s["qr"], q1, s["hurst"], s["C0"])
-    ref = spectra.SelfAffine.from_hrms(s["q0"], s["qr"], max(s["q1"]), s["hurst"], s["hrms"])
-    return spectra.SelfAffine(s["q0"], s["qr"], q1, s["hurst"], ref.C0)
+    s = job.surface
+    if s.C0 is not None:
+        return spectra.SelfAffine(s.q0, s.qr, q1, s.hurst, s.C0)
+    ref = spectra.SelfAffine.from_hrms(s.q0, s.qr, max(s.q1), s.hurst, s.hrms)
+    return spectra.SelfAffine(s.q0, s.qr, q1, s.hurst, ref.C0)
 
 
 def _theory(job, psd, velocities, pressures):
-    t = job["theory"]
-    kw = {k: t[k] for k in ("nq", "nphi") if t.get(k)}
-    return persson(psd, make_modulus(job["material"]), np.asarray(velocities, float),
-                   np.asarray(pressures, float), gamma=t["gamma"], **kw)
+    t = job.theory
+    kw = {k: n for k, n in (("nq", t.nq), ("nphi", t.nphi)) if n}
+    return persson(psd, job.material.modulus(), np.asarray(velocities, float),
+                   np.asarray(pressures, float), gamma=t.gamma, **kw)
 
 
 def _pressure_list(job, psd, velocity):
     """Pressures of the sweep at one (q1, v): explicit, or chosen from the theory's area range."""
-    p = job["sweep"]["pressure"]
-    if isinstance(p, list):
-        return p
+    p = job.sweep.pressure
+    if not isinstance(p, AreaRange):
+        return list(p)
     # area targets: invert the master curve A/A0 = erf(sqrt(2)(1-nu^2) sigma0/(E0 xi)) exactly
-    mat = job["material"]
+    mat = job.material
     xi = float(_theory(job, psd, [velocity], [1.0]).xi[0])
-    x = _erfinv(np.geomspace(p["area_min"], p["area_max"], p["num"]))
-    sig = x * make_modulus(mat).E0 * xi / (np.sqrt(2.0) * (1.0 - mat["nu"] ** 2))
+    x = _erfinv(np.geomspace(p.area_min, p.area_max, p.num))
+    sig = x * mat.modulus().E0 * xi / (np.sqrt(2.0) * (1.0 - mat.nu ** 2))
     return [float(f"{s:.6e}") for s in sig]
 
 
@@ -80,8 +79,8 @@ def expand(job, psds):
     """All cases of the job, sorted. ``psds`` maps q1 -> spectrum (callable C(q))."""
     cases = []
     for q1, psd in psds.items():
-        for seed in seeds_for(job["surface"], q1):
-            for v in job["sweep"]["velocity"]:
+        for seed in job.surface.realisations(q1):
+            for v in job.sweep.velocity:
                 for p in _pressure_list(job, psd, v):
                     cases.append(Case(float(q1), int(seed), float(v), float(p)))
     return sorted(cases)
@@ -98,9 +97,9 @@ def theory(job, psds, cases):
     Returns (rows, groups): rows maps case key -> results row with the theory columns filled.
     """
     rows, theory_group, spectrum_group = {}, {}, {}
-    nu = job["material"]["nu"]
-    E0 = make_modulus(job["material"]).E0
-    velocities = job["sweep"]["velocity"]
+    nu = job.material.nu
+    E0 = job.material.modulus().E0
+    velocities = job.sweep.velocity
     for i, (q1, psd) in enumerate(sorted(psds.items())):
         mine = [c for c in cases if c.q1 == q1]
         per_v = [_theory(job, psd, [v], r_pressures(mine, v)) for v in velocities]
@@ -125,7 +124,7 @@ def theory(job, psds, cases):
         }
         qs = np.geomspace(psd.q_min, psd.q_max, 400)
         spectrum_group[f"q1_{i}"] = {"@q1": q1, "q": qs, "C": psd(qs)}
-    attrs_t = {"gamma": job["theory"]["gamma"], "E0": E0, "nu": nu,
+    attrs_t = {"gamma": job.theory.gamma, "E0": E0, "nu": nu,
                "units": "q: 1/m; pressure: Pa; velocity: m/s; P_q, area, mu, xi: dimensionless",
                "layout": "q1_<i>/pressure[velocity, k], P_q[velocity, k, q], area/mu[velocity, k]; "
                          "curves/*[velocity, j] (dense, for figures)"}

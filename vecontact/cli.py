@@ -122,7 +122,7 @@ def _dispatch(argv):
         run(job, MPI.COMM_WORLD, quiet=args.quiet, petsc_args=petsc, only_q1=args.q1)
         if MPI.COMM_WORLD.rank == 0 and not args.no_plot:
             from vecontact.plot import plot_results
-            paths = plot_results(job["output"])
+            paths = plot_results(job.output)
             if not args.quiet:
                 print(f"vecontact: figures in {os.path.dirname(paths[0])}")
         return 0

@@ -2,13 +2,13 @@
 
 Every problem raises :class:`vecontact.errors.InputError` naming the dotted key
 (``surface.q1``, ``sweep.pressure.num``...) before any work starts. The resolved job is a
-plain nested dict with every default filled in and every sweep axis expanded to a list, so
-that it can be stored as YAML provenance and hashed for restarts.
+:class:`vecontact.jobtypes.Job` (frozen sections, every default filled in, every sweep axis
+expanded); ``job.to_dict()`` is the plain dict stored as YAML provenance (:func:`to_yaml`) and
+hashed for restarts (:func:`physics_hash`).
 
 Units are SI throughout: wavevectors in 1/m, lengths in m, moduli and pressures in Pa,
 times in s, velocities in m/s.
 """
-import copy
 import hashlib
 import json
 import math
@@ -18,6 +18,8 @@ import numpy as np
 import yaml
 
 from vecontact.errors import InputError
+from vecontact.jobtypes import (Job, Material, Numerics, Surface, Sweep, Theory, fft_size,  # noqa: F401
+                                grid_points, nyquist_points)
 from vecontact.solver.options import parse as parse_petsc
 
 MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
@@ -170,17 +172,15 @@ def _surface(job, base):
         out["hrms"] = _number(s, "hrms", p, lo=0, lo_open=True)
     out["null_band"] = nb = _number(s, "null_band", p, default=8, lo=1)
     out["seeds"] = _seeds(s, p, q1)
-    out["grid"] = {}
     for v in q1:
-        n_float = 2.0 * nb * v / q0
-        n = int(round(n_float))
+        n_float = nyquist_points(q0, v, nb)
+        n = grid_points(spectrum, q0, v, nb)
         if abs(n - n_float) > 1e-6 * n_float:
             raise InputError(f"{p}.q1", f"grid size N = 2 null_band q1 / q0 = {n_float:.6g} "
                                         f"is not an integer for q1 = {v:g}")
         if n < 4:
             raise InputError(f"{p}.q1", f"grid size N = {n} is too small (need N >= 4)")
-        out["grid"][repr(float(v))] = n
-    return out
+    return Surface.from_dict(out)
 
 
 def _surface_file(s, p, base, common, out):
@@ -201,23 +201,11 @@ def _surface_file(s, p, base, common, out):
         out["length"] = _number(s, "length", p, lo=0, lo_open=True)
     out["seeds"] = [0]
     out["null_band"] = None
-    return out
+    return Surface.from_dict(out)
 
 
 #: Largest grid (points per side) a job on a measured spectrum may ask the solver for.
 MAX_PSD_GRID = 16384
-
-
-def fft_size(n_min):
-    """The smallest N >= n_min of the form 2^a, 3 2^a or 5 2^a (a >= 1): even, a fast FFT size,
-    and halvable for the solver's coarse grids."""
-    best = None
-    for m in (1, 3, 5):
-        n = 2 * m
-        while n < n_min:
-            n *= 2
-        best = n if best is None else min(best, n)
-    return best
 
 
 def _surface_psd(job, s, p, base, common, out):
@@ -243,21 +231,19 @@ def _surface_psd(job, s, p, base, common, out):
     out["null_band"] = nb = _number(s, "null_band", p, default=8, lo=1)
     out["seeds"] = _seeds(s, p, q1)
     out["table"] = {"rows": int(psd.q.size), "q_min": psd.q_min, "q_max": psd.q_max, "hrms": psd.hrms()}
-    out["grid"] = {}
     numerics = job.get("numerics") if isinstance(job.get("numerics"), dict) else {}
     for v in q1:
-        n = fft_size(2.0 * nb * v / q0 * (1 - 1e-12))
+        n = grid_points(out["spectrum"], q0, v, nb)
         if numerics.get("enabled") is True and n > MAX_PSD_GRID:
             raise InputError(f"{p}.q1", f"the solver would need a {n} x {n} grid for q1 = {v:g} 1/m with "
                                         f"length {L:.4g} m (N > {MAX_PSD_GRID}): give a smaller q1 or length")
-        out["grid"][repr(float(v))] = n
-    return out
+    return Surface.from_dict(out)
 
 
 def _seeds(s, p, q1):
     """``seeds``: a list (every q1), or a mapping {q1: list, ..., other: list} so that the small
     systems get more realisations than the large ones. Resolved to the list, or to
-    {repr(q1): list} for every q1 (read it with :func:`seeds_for`)."""
+    {repr(q1): list} for every q1 (read it with :meth:`Surface.realisations`)."""
     v = s.get("seeds", [1])
     if not isinstance(v, dict):
         return _number_list(s, "seeds", p, lo=0, integer=True, default=[1])
@@ -281,13 +267,9 @@ def _seeds(s, p, q1):
     return out
 
 
-def seeds_for(surface, q1):
-    """The surface realisations (seeds) of a resolved job's surface section at cut-off q1 (1/m)."""
-    seeds = surface["seeds"]
-    return seeds if isinstance(seeds, list) else seeds[repr(float(q1))]
-
-
 def _material(job, base):
+    """The ``material`` section as a :class:`Material`; a table file is read now (a bad file is an
+    input error, found before any work) and the modulus kept (:meth:`Material.modulus`)."""
     m = _section(job, "material")
     p = "material"
     model = _choice(m, "model", p, MODELS)
@@ -342,11 +324,10 @@ def _material(job, base):
         else:
             out["wlf"] = None
     _unknown(m, p, keys)
+    material = Material.from_dict(out)
     if model == "table":
-        # Read the table now: a bad file is an input error, found before any work.
-        from vecontact.physics.modulus import make_modulus
-        make_modulus(out)
-    return out
+        material.modulus()
+    return material
 
 
 def _sweep(job):
@@ -363,8 +344,8 @@ def _sweep(job):
         num = _number(pr, "num", f"{p}.pressure", lo=1, integer=True)
         if hi < lo:
             raise InputError(f"{p}.pressure.area_max", f"must be >= area_min = {lo:g}, got {hi:g}")
-        return {"velocity": [float(v) for v in velocity],
-                "pressure": {"area_min": lo, "area_max": hi, "num": num}}
+        return Sweep.from_dict({"velocity": [float(v) for v in velocity],
+                                "pressure": {"area_min": lo, "area_max": hi, "num": num}})
     if isinstance(pr, dict):
         _unknown(pr, f"{p}.pressure", {"min", "max", "num"})
         lo = _number(pr, "min", f"{p}.pressure", lo=0, lo_open=True)
@@ -377,7 +358,7 @@ def _sweep(job):
         pressure = [float(x) for x in np.geomspace(lo, hi, num)]
     else:
         pressure = sorted(_number_list(s, "pressure", p, lo=0, lo_open=True))
-    return {"velocity": [float(v) for v in velocity], "pressure": pressure}
+    return Sweep.from_dict({"velocity": [float(v) for v in velocity], "pressure": pressure})
 
 
 def _theory(job):
@@ -386,7 +367,7 @@ def _theory(job):
     out = {"gamma": _number(t, "gamma", "theory", default=0.5, lo=0, hi=1)}
     out["nq"] = _number(t, "nq", "theory", required=False, lo=16, integer=True)
     out["nphi"] = _number(t, "nphi", "theory", required=False, lo=8, integer=True)
-    return out
+    return Theory.from_dict(out)
 
 
 def _numerics(job, material):
@@ -396,7 +377,7 @@ def _numerics(job, material):
                     "ranks_per_case", "coarse", "max_iterations", "threads"})
     out = {"enabled": _bool(n, "enabled", p, False)}
     out["solver"] = _choice(n, "solver", p, SOLVERS, default="snes")
-    if out["solver"] == "pk" and material["model"] != "elastic":
+    if out["solver"] == "pk" and material.model != "elastic":
         raise InputError(f"{p}.solver", "pk (Polonsky-Keer) is valid only for elastic materials: "
                                         "the viscoelastic operator is not symmetric")
     out["tolerance"] = _number(n, "tolerance", p, default=1e-8, lo=0, hi=1e-2, lo_open=True)
@@ -416,12 +397,13 @@ def _numerics(job, material):
     out["coarse"] = _bool(n, "coarse", p, True)
     out["max_iterations"] = _number(n, "max_iterations", p, required=False, lo=1, integer=True)
     out["threads"] = _number(n, "threads", p, default=1, lo=1, integer=True)
-    return out
+    return Numerics.from_dict(out)
 
 
 # --------------------------------------------------------------------------------------------
 def resolve(raw, base="."):
-    """Validate a parsed job (dict) and return the resolved job; ``base`` resolves relative paths."""
+    """Validate a parsed job (dict) and return the resolved :class:`Job`; ``base`` resolves relative
+    paths."""
     if not isinstance(raw, dict):
         raise InputError("", "a job file must be a YAML mapping of sections")
     _unknown(raw, "", {"output", "surface", "material", "sweep", "theory", "numerics"})
@@ -430,15 +412,15 @@ def resolve(raw, base="."):
         raise InputError("output", "must be the path of the HDF5 file to write")
     if not out.endswith((".h5", ".hdf5")):
         raise InputError("output", f"must end in .h5 or .hdf5, got {out!r}")
-    job = {"output": out if os.path.isabs(out) else os.path.normpath(os.path.join(base, out))}
-    job["surface"] = _surface(raw, base)
-    job["material"] = _material(raw, base)
-    job["sweep"] = _sweep(raw)
-    job["theory"] = _theory(raw)
-    job["numerics"] = _numerics(raw, job["material"])
-    if job["surface"]["spectrum"] == "file" and job["surface"]["amplitudes"] != "fixed":
+    output = out if os.path.isabs(out) else os.path.normpath(os.path.join(base, out))
+    surface = _surface(raw, base)
+    material = _material(raw, base)
+    sweep = _sweep(raw)
+    theory = _theory(raw)
+    numerics = _numerics(raw, material)
+    if surface.spectrum == "file" and surface.amplitudes != "fixed":
         raise InputError("surface.amplitudes", "applies to generated surfaces only")
-    return job
+    return Job(output=output, surface=surface, material=material, sweep=sweep, theory=theory, numerics=numerics)
 
 
 def load(path, output=None):
@@ -464,8 +446,9 @@ def load(path, output=None):
 
 
 def physics_hash(job):
-    """SHA-256 of everything in the job that changes results (restart guard)."""
-    j = copy.deepcopy(job)
+    """SHA-256 of everything in the :class:`Job` that changes results (restart guard): of the JSON
+    text of its resolved dict, without the NON_PHYSICS keys, with the hashes of its input files."""
+    j = job.to_dict()
     for key in NON_PHYSICS:
         d = j
         for k in key[:-1]:
@@ -488,9 +471,5 @@ def _file_hash(path):
 
 
 def to_yaml(job):
-    return yaml.safe_dump(job, sort_keys=False, default_flow_style=None)
-
-
-def grid_size(job, q1):
-    """Grid points per side for a generated surface with large-wavevector cut-off q1 (1/m)."""
-    return job["surface"]["grid"][repr(float(q1))]
+    """The resolved :class:`Job` as YAML text (the ``job_yaml`` of results and surface files)."""
+    return yaml.safe_dump(job.to_dict(), sort_keys=False, default_flow_style=None)

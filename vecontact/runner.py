@@ -11,7 +11,7 @@ from vecontact import cases as sweep
 from vecontact.errors import InputError, ResultsFileError
 from vecontact.io.results import ResultsFile
 from vecontact.job import physics_hash, to_yaml
-from vecontact.physics.modulus import make_modulus, warn_coverage
+from vecontact.physics.modulus import warn_coverage
 from vecontact.physics.spectrum import Tabulated
 
 
@@ -23,28 +23,26 @@ def spectra(job, comm, warn=True):
     file: the radially averaged PSD of the surface (one q1: its largest bin). With ``warn``, warns
     (:class:`InputWarning`, rank 0) when a tabulated modulus does not cover the frequencies q v.
     """
-    s = job["surface"]
-    if s["spectrum"] == "self-affine":
-        out = {float(q1): sweep.spectrum_for(job, q1) for q1 in s["q1"]}
-    elif s["spectrum"] == "psd":
+    s = job.surface
+    if s.spectrum == "self-affine":
+        out = {float(q1): sweep.spectrum_for(job, q1) for q1 in s.q1}
+    elif s.spectrum == "psd":
         from vecontact.io.psd import read_psd
-        table = read_psd(s["file"], s["dimension"], columns=s.get("columns"))
-        out = {float(q1): table.band(s["q0"], q1) for q1 in s["q1"]}
+        table = read_psd(s.file, s.dimension, columns=s.columns)
+        out = {float(q1): table.band(s.q0, q1) for q1 in s.q1}
     else:
         from vecontact.core.surface import load
-        from vecontact.io.surfaces import file_grid_size
         from vecontact.core.pfft import SlabFFT
-        n = file_grid_size(s["file"], s.get("dataset"))
-        fft = SlabFFT(comm, n)
-        h = load(fft, s["file"], s.get("dataset"))
+        fft = SlabFFT(comm, s.grid(None))
+        h = load(fft, s.file, s.dataset)
         try:
-            psd = Tabulated.from_surface(fft, h, s["length"])
+            psd = Tabulated.from_surface(fft, h, s.length)
         except ValueError as exc:
             raise InputError("surface.file", str(exc)) from None
         out = {float(psd.q_max): psd}
     if warn and comm.rank == 0:
-        warn_coverage(make_modulus(job["material"]), min(p.q_min for p in out.values()),
-                      max(p.q_max for p in out.values()), job["sweep"]["velocity"])
+        warn_coverage(job.material.modulus(), min(p.q_min for p in out.values()),
+                      max(p.q_max for p in out.values()), job.sweep.velocity)
     return out
 
 
@@ -53,7 +51,7 @@ def open_results(job, comm):
     writer, err = None, None
     if comm.rank == 0:
         try:
-            writer = ResultsFile.open(job["output"], to_yaml(job), physics_hash(job), comm.size)
+            writer = ResultsFile.open(job.output, to_yaml(job), physics_hash(job), comm.size)
         except InputError as exc:
             err = exc
     # the exception object itself does not survive pickling (InputError takes two arguments)
@@ -69,7 +67,7 @@ def select_q1(job, text):
     """The q1 values (1/m) named by ``--q1`` ("8e6,1.6e7"), each one of the job's; None: all."""
     if text is None:
         return None
-    known = [float(q) for q in job["surface"].get("q1", [])]
+    known = [float(q) for q in job.surface.q1]
     out = []
     for item in filter(None, (t.strip() for t in str(text).split(","))):
         try:
@@ -95,7 +93,7 @@ def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=(), only_q1=None):
     if writer is not None:
         for name, (datasets, attrs) in groups.items():
             writer.set_group(name, datasets, attrs)
-    if job["numerics"]["enabled"]:
+    if job.numerics.enabled:
         from vecontact.farm import run_numerics
         run_numerics(job, comm, writer, cases, rows, psds, quiet=quiet, petsc_args=petsc_args, only_q1=only)
     elif writer is not None:
@@ -103,5 +101,5 @@ def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=(), only_q1=None):
             writer.add_row(row)
         writer.commit(complete=True)
     if comm.rank == 0 and not quiet:
-        print(f"vecontact: {len(cases)} cases written to {job['output']}", file=sys.stdout, flush=True)
+        print(f"vecontact: {len(cases)} cases written to {job.output}", file=sys.stdout, flush=True)
     return len(cases)

@@ -10,7 +10,7 @@ import numpy as np
 import yaml
 
 from vecontact.io.results import open_for_reading, read_strings
-from vecontact.job import seeds_for
+from vecontact.jobtypes import Job
 from vecontact.rows import REASON, case_key
 
 
@@ -19,12 +19,12 @@ def read_status(path):
 
     Raises InputError (key ``results``) for a missing or foreign file."""
     with open_for_reading(path) as f:
-        job = yaml.safe_load(f.attrs["job_yaml"])
+        job = Job.from_dict(yaml.safe_load(f.attrs["job_yaml"]))
         expected = []
         for name in f["theory"]:
             g = f["theory"][name]
             q1 = float(g.attrs["q1"])
-            for seed in seeds_for(job["surface"], q1):
+            for seed in job.surface.realisations(q1):
                 for i, v in enumerate(g["velocity"][()]):
                     expected += [(q1, int(seed), float(v), float(p)) for p in g["pressure"][i]]
         cases = f["cases"][()]
@@ -32,7 +32,7 @@ def read_status(path):
         runs = [json.loads(r) for r in read_strings(f, "runs")]
         complete = bool(f.attrs.get("complete", False))
     return dict(job=job, expected=sorted(set(expected)), cases=cases, diagnostics=diag, runs=runs,
-                complete=complete, numerics=bool(job.get("numerics", {}).get("enabled", False)))
+                complete=complete, numerics=bool(job.numerics.enabled))
 
 
 def format_status(path, st):
@@ -58,7 +58,7 @@ def format_status(path, st):
         rows = cases[sel]
         ok = rows[rows["status"] == 1]
         area = f"{ok['area'].min():.4f}-{ok['area'].max():.4f}" if len(ok) else "-"
-        N = int(rows["N"].max()) if len(rows) else _grid(st["job"], q1)
+        N = int(rows["N"].max()) if len(rows) else _grid(st["job"].surface, q1)
         secs = rows["seconds"][np.isfinite(rows["seconds"])]
         core_h = float(np.sum(secs * np.maximum(rows["ranks"][np.isfinite(rows["seconds"])], 1))) / 3600
         lines.append(f"{q1:10.4g} {seed:4d} {v:8.4g} {N:5d}  {len(ok):>4d}/{total:<5d} "
@@ -83,9 +83,9 @@ def format_status(path, st):
     return lines
 
 
-def _grid(job, q1):
-    grid = job.get("surface", {}).get("grid") or {}
-    return int(grid.get(repr(float(q1)), 0))
+def _grid(surface, q1):
+    """N of a generated surface at q1; 0 for a height file (not read here: status reads the results only)."""
+    return 0 if surface.spectrum == "file" else surface.grid(q1)
 
 
 def status(path):

@@ -61,30 +61,30 @@ def _table(comm, path):
 def test_farm_in_process(comm, shared_dir, rpc):
     job = _job(comm, shared_dir, ranks_per_case=rpc)
     assert run(job, comm, quiet=True) == 6
-    t = _table(comm, job["output"])
+    t = _table(comm, job.output)
     assert len(t) == 6 and set(np.abs(t["status"])) == {1}
     assert set(t["ranks"]) == ({1} if rpc == "auto" else {min(2, comm.size)})
     # a rerun has nothing to do and leaves the table alone
     run(job, comm, quiet=True)
-    t2 = _table(comm, job["output"])
+    t2 = _table(comm, job.output)
     np.testing.assert_array_equal(t, t2)
 
 
 def test_farm_resumes_a_partial_file(comm, shared_dir):
     job = _job(comm, shared_dir)
     run(job, comm, quiet=True)
-    full = _table(comm, job["output"])
+    full = _table(comm, job.output)
     # drop half the rows as if the job had been killed, then resume
     if comm.rank == 0:
         from vecontact.io.results import ResultsFile
         from vecontact.job import physics_hash, to_yaml
-        w = ResultsFile.open(job["output"], to_yaml(job), physics_hash(job), comm.size)
+        w = ResultsFile.open(job.output, to_yaml(job), physics_hash(job), comm.size)
         for k in sorted(w.rows)[::2]:
             del w.rows[k]
         w.commit()
     comm.Barrier()
     run(job, comm, quiet=True)
-    again = _table(comm, job["output"])
+    again = _table(comm, job.output)
     for k in ("q1", "seed", "velocity", "pressure", "N", "status"):
         np.testing.assert_array_equal(full[k], again[k])
     np.testing.assert_allclose(full["area"], again["area"], atol=2.5 / 64 ** 2)

@@ -5,14 +5,14 @@ pressure in Pa, areas as fractions A/A0, E0 in Pa. The job's expected cases come
 (pressures of every (q1, v)) and the seeds of the stored job, so a partially complete file is described
 as such: which q1 and seeds have converged numerics and which do not.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import yaml
 
 from vecontact.analysis.ensemble import converged_rows, seed_points
 from vecontact.io.results import open_for_reading
-from vecontact.job import seeds_for
+from vecontact.jobtypes import Job
 
 
 @dataclass(frozen=True)
@@ -43,10 +43,11 @@ class Theory:
 
 @dataclass
 class Study:
-    """A results file: ``job`` (the resolved job), ``theories`` (sorted by q1), ``cases`` (all rows of
-    /cases), ``E0`` (Pa), ``nu``, ``gamma``, ``attrs`` (root attributes: updated, complete, git_commit)."""
+    """A results file: ``job`` (the stored :class:`~vecontact.jobtypes.Job`), ``theories`` (sorted by
+    q1), ``cases`` (all rows of /cases), ``E0`` (Pa), ``nu``, ``gamma``, ``attrs`` (root attributes:
+    updated, complete, git_commit)."""
     path: str
-    job: dict
+    job: Job
     theories: list
     cases: np.ndarray
     E0: float
@@ -68,7 +69,7 @@ class Study:
 
     def seeds(self, q1):
         """The job's seeds at q1 (what a complete sweep has)."""
-        return [int(s) for s in seeds_for(self.job["surface"], q1)]
+        return [int(s) for s in self.job.surface.realisations(q1)]
 
     def converged(self):
         """Converged rows only (status 1): the only rows that are results."""
@@ -86,7 +87,7 @@ class Study:
 
     def q1_label(self, q1):
         """'32 q0' (or '8e+06 1/m' when the job has no q0)."""
-        q0 = self.job["surface"].get("q0")
+        q0 = self.job.surface.q0
         return f"{q1 / q0:.0f} q0" if q0 else f"{q1:.3g} 1/m"
 
     def expected_cases(self):
@@ -102,7 +103,7 @@ class Study:
 def load_study(path):
     """Read a results file into a :class:`Study` (InputError if it is not one)."""
     with open_for_reading(path) as f:
-        job = yaml.safe_load(f.attrs["job_yaml"])
+        job = Job.from_dict(yaml.safe_load(f.attrs["job_yaml"]))
         theories = []
         for name in f["theory"]:
             g, s = f["theory"][name], f["spectrum"][name]
@@ -124,5 +125,5 @@ def recompute_theory(study, q1, velocities, pressures, gamma=None):
 
     gamma enters only S(q) = gamma + (1 - gamma) P(q)^2, i.e. mu; A/A0 = P(q1) does not depend on it."""
     from vecontact.cases import _theory, spectrum_for
-    job = dict(study.job, theory=dict(study.job["theory"], gamma=study.gamma if gamma is None else gamma))
+    job = replace(study.job, theory=replace(study.job.theory, gamma=study.gamma if gamma is None else gamma))
     return _theory(job, spectrum_for(job, q1), velocities, pressures)

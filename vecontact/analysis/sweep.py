@@ -9,8 +9,9 @@ SIZES = [m for m in MORPHOLOGY if m[0] != "patches"]
 
 
 def _grid(study, q1):
-    grid = study.job["surface"].get("grid", {})
-    return grid.get(repr(float(q1)), "—")
+    """N at q1; a dash for a height file (not read: the report reads the results file only)."""
+    s = study.job.surface
+    return "—" if s.spectrum == "file" else s.grid(q1)
 
 
 def seeds_table(study):

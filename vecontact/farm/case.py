@@ -32,16 +32,14 @@ class Setup:
 
     @classmethod
     def from_job(cls, job, petsc_options):
-        from vecontact.physics.modulus import make_modulus
-        num, s = job["numerics"], job["surface"]
-        fields = tuple(num["fields"])
-        L = s["length"] if s["spectrum"] == "file" else 2.0 * np.pi / s["q0"]
+        num = job.numerics
+        fields = tuple(num.fields)
         # the pressure always: its contact set gives the morphology columns
         store = tuple(f for f in ("pressure", "gap", "displacement") if f in fields or f == "pressure")
-        return cls(L=L, modulus=make_modulus(job["material"]), tolerance=num["tolerance"],
-                   method=num["solver"], coarse=num["coarse"], max_iterations=num["max_iterations"],
+        return cls(L=job.surface.length, modulus=job.material.modulus(), tolerance=num.tolerance,
+                   method=num.solver, coarse=num.coarse, max_iterations=num.max_iterations,
                    petsc_options=petsc_options, store=store, fields=fields,
-                   downsample=int(num["downsample"]), output=job["output"])
+                   downsample=int(num.downsample), output=job.output)
 
 
 def solve_case(group, fft, heights, case, theory, setup, warm=None):

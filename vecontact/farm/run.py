@@ -17,19 +17,10 @@ from vecontact.farm.transport import Hub, Link, abort, wait
 from vecontact.farm.worker import Worker
 
 
-def grid_of(job, q1):
-    """Grid points per side of the cases at cut-off ``q1`` (1/m)."""
-    s = job["surface"]
-    if s["spectrum"] == "file":
-        from vecontact.io.surfaces import file_grid_size
-        return file_grid_size(s["file"], s.get("dataset"))
-    return s["grid"][repr(float(q1))]
-
-
 def petsc_options(job, petsc_args):
     """job's numerics.petsc merged with the command line's PETSc options (command line wins)."""
     from vecontact.solver.options import parse
-    opts = dict(job["numerics"].get("petsc") or {})
+    opts = dict(job.numerics.petsc or {})
     if petsc_args:
         opts.update(parse(list(petsc_args), "numerics.petsc"))
     return opts
@@ -52,7 +43,7 @@ def _first_commit(comm, writer):
 
 def _init_petsc(job):
     """PetscInitialize is collective on COMM_WORLD: do it on every rank before the groups split."""
-    if job["numerics"]["solver"] != "snes":
+    if job.numerics.solver != "snes":
         return
     try:
         from petsc4py import PETSc  # noqa: F401
@@ -68,7 +59,7 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     t_start = time.perf_counter()
     options = petsc_options(job, petsc_args)     # bad options: InputError on every rank
     rank, size = comm.rank, comm.size
-    num = job["numerics"]
+    num = job.numerics
     todo = np.ones(len(cases), dtype=bool)
     if rank == 0 and writer is not None:
         done = writer.done()
@@ -77,12 +68,12 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     if only_q1 is not None:
         todo &= np.array([c.q1 in only_q1 for c in cases], dtype=bool)
     if rank == 0 and writer is not None:
-        writer.note_run(petsc_options=options, ranks_per_case=str(num["ranks_per_case"]))
+        writer.note_run(petsc_options=options, ranks_per_case=str(num.ranks_per_case))
     _first_commit(comm, writer)
     threaded = size == 1 or MPI.Query_thread() >= MPI.THREAD_MULTIPLE
     nwork = size if threaded else size - 1
-    Ns = {q1: grid_of(job, q1) for q1 in psds}
-    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num["ranks_per_case"])
+    Ns = {q1: job.surface.grid(q1) for q1 in psds}
+    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case)
     _init_petsc(job)
     ctl = comm.Dup()
     fin = comm.Dup()
@@ -93,9 +84,9 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
         coord = Coordinator(chains, cases, writer, ndone=ndone, progress=report)
         hub = Hub(coord, ctl, comm)
         if not quiet:
-            rule = {N: ranks_for_grid(N, nwork, num["ranks_per_case"]) for N in set(Ns.values())}
+            rule = {N: ranks_for_grid(N, nwork, num.ranks_per_case) for N in set(Ns.values())}
             print(progress.start_line(len(cases), ndone, int(todo.sum()), len(chains), size,
-                                      num["ranks_per_case"], rule, threaded), flush=True)
+                                      num.ranks_per_case, rule, threaded), flush=True)
     worker = Worker(job, comm, Link(comm, ctl, hub), cases, rows, psds, Ns, chains, options)
     try:
         if threaded:

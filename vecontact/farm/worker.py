@@ -49,8 +49,8 @@ class Worker:
         self.psds = psds
         self.Ns = Ns
         self.chains = chains
-        self.surface_spec = job["surface"]
-        self.threads = job["numerics"]["threads"]
+        self.surface_spec = job.surface
+        self.threads = job.numerics.threads
         self.setup = Setup.from_job(job, petsc_options)
         self.faults = fault_targets(cases)
         self.busy = 0.0             # s spent solving
@@ -104,12 +104,12 @@ class Worker:
         if self._surface is None or self._surface[0] != key:
             self._surface = None
             s = self.surface_spec
-            if s["spectrum"] == "file":
+            if s.spectrum == "file":
                 from vecontact.core.surface import load
-                h = load(fft, s["file"], s.get("dataset"))
+                h = load(fft, s.file, s.dataset)
             else:
                 from vecontact.core.surface import generate
-                h = generate(fft, self.setup.L, self.psds[q1], seed, amplitudes=s["amplitudes"])
+                h = generate(fft, self.setup.L, self.psds[q1], seed, amplitudes=s.amplitudes)
             self._surface = (key, h)
         return self._surface[1]
 

@@ -60,23 +60,23 @@ def write_job_surfaces(job, path, comm):
     from vecontact.core.pfft import SlabFFT
     from vecontact.runner import spectra
     from vecontact.core.surface import generate, statistics
-    from vecontact.job import grid_size, seeds_for, to_yaml
+    from vecontact.job import to_yaml
     from vecontact import __version__
 
-    s = job["surface"]
-    if s["spectrum"] == "file":
+    s = job.surface
+    if s.spectrum == "file":
         raise InputError("surface.spectrum", "'vecontact surface' generates surfaces; this job reads one from a file")
     if not path.endswith((".h5", ".hdf5")):
         raise InputError("output", f"surfaces are written to an .h5 file, got {path!r}")
-    L = 2 * np.pi / s["q0"]
+    L = s.length
     psds = spectra(job, comm)
     items = []
-    for q1 in s["q1"]:
-        n = grid_size(job, q1)
+    for q1 in s.q1:
+        n = s.grid(q1)
         fft = SlabFFT(comm, n)
         psd = psds[float(q1)]
-        for seed in seeds_for(s, q1):
-            h = generate(fft, L, psd, seed, amplitudes=s["amplitudes"])
+        for seed in s.realisations(q1):
+            h = generate(fft, L, psd, seed, amplitudes=s.amplitudes)
             items.append((q1, seed, n, fft, h, statistics(fft, h, L), psd))
 
     def fill(f):
@@ -85,9 +85,9 @@ def write_job_surfaces(job, path, comm):
         f.attrs["units"] = "heights: m; L: m; q0, q1: 1/m"
         for q1, seed, n, fft, h, st, psd in items:
             d = f.create_dataset(f"q1_{q1:.6e}_seed_{seed}", shape=(n, n), dtype="f8")
-            if "qr" in s:
-                d.attrs["qr"] = s["qr"]
-            d.attrs.update({"L": L, "q0": s["q0"], "q1": q1, "seed": seed, "N": n,
+            if s.qr is not None:
+                d.attrs["qr"] = s.qr
+            d.attrs.update({"L": L, "q0": s.q0, "q1": q1, "seed": seed, "N": n,
                             "hrms": st["hrms"], "slope_rms": st["slope_rms"],
                             "hrms_spectrum": psd.hrms(), "slope_rms_spectrum": np.sqrt(psd.slope2())})
             write_rows(comm, d, fft.row_start, h)

@@ -10,7 +10,8 @@ Every model is a callable ``model(omega) -> complex ndarray`` with
 
 Models: :class:`Elastic`, :class:`SLS`, :class:`Prony` (generalised Maxwell),
 :class:`HavriliakNegami`, :class:`Table` (tabulated master curve with optional WLF shift).
-:func:`make_modulus` builds one from the ``material`` section of a job file.
+:func:`make_modulus` builds one from the ``material`` section of a job file (a job's
+:meth:`vecontact.jobtypes.Material.modulus` builds it once and keeps it).
 """
 import math
 import os
