@@ -64,6 +64,8 @@ def test_mapping_values():
     ("-contact_step free", "renamed -vc_contact_step"),
     ("-contact_step_area 0.2", "renamed -vc_contact_step_area"),
     ("-snes_type vinewtonssls", "removed"),
+    ("-vc_recycle_vectors 0", "removed with the Krylov recycling"),
+    ({"vc_recycle_cost": 4}, "lost in wall time"),
 ])
 def test_errors_name_the_key(value, problem):
     """Bad options: an OptionError that is an InputError (one line, the caller's key) and a ValueError."""

@@ -20,19 +20,15 @@ preconditioner: m and c are exact inverses on the full grid, the restriction onl
 contact edges, so the iteration count grows only mildly with N).  The Krylov vectors live on C: at
 A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little next to the FFTs.
 
-Krylov recycling (_Recycler, SolverSettings.recycle_vectors): the contact set, hence A, barely changes
-between late Newton steps, yet each step used to start its Krylov solve afresh.  Every inner solve now
-keeps its preconditioned directions z and the full fields c z; the next step maps them to its set with no
-FFT (the points that left the set are removed with the real-space kernel of c) and runs GCRO with them as
-a fixed recycle space: 512^2, 10 m/s, 5-30 %: 20-35 % fewer FFT pairs (benchmarks/RESULTS.md).
+Each step starts its inner Krylov solve afresh.  Krylov recycling across the steps (GCRO with the
+directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pairs but cost 11-50 % more
+wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).
 
-Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), + 1 with a recycle space.
+Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B).
 The inner KSP has the options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning,
 so its residual norm is the gap error on C in units of h_rms; restart SolverSettings.inner_restart).
 """
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 from mpi4py import MPI
@@ -44,12 +40,11 @@ __all__ = ["ContactSetStep", "oracle_solve"]
 
 class _Restricted:
     """y = P (multiplier P x)_C for a Fourier multiplier ``multiplier`` (Python Mat and Python PC of the
-    inner KSP).  ``deflate``: the Mat of the inner KSP, projected by the recycler (see _Recycler)."""
+    inner KSP)."""
 
-    def __init__(self, step, multiplier, deflate=False):
+    def __init__(self, step, multiplier):
         self.step = step
         self.multiplier = multiplier
-        self.deflate = deflate
 
     def _apply(self, x, y):
         s = self.step
@@ -60,8 +55,6 @@ class _Restricted:
         ya = y.getArray()
         np.take(s.out.ravel(), s.idx, out=ya)
         ya -= s.mean_C(ya)
-        if self.deflate and s.recycler is not None:
-            s.recycler.after_mult(xa, s.out, ya)
 
     def mult(self, mat, x, y):
         self._apply(x, y)
@@ -71,128 +64,6 @@ class _Restricted:
 
     def setUp(self, pc):
         pass
-
-
-class _Recycler:
-    """Krylov subspace recycling across the Newton steps of one grid (GCRO with a fixed recycle space).
-
-    Every inner solve records its preconditioned directions z (on its contact set) and the full fields
-    c z.  The next step maps them to its contact set C' at no FFT cost: z restricted to C' (mean removed);
-    its image under A' = P c_C'C' is (c z)_C' minus the contribution of the points that left the set
-    (real-space kernel of c, one dense product); means are removed with the vector of largest mean.  With
-    W = A'U orthonormal the solve starts from y0 = U W^T b and iterates on (I - W W^T) A', whose
-    residual is the true one; the solution is y0 + t - U W^T A' t (one more FFT pair).
-    ``kmax``: vectors kept (newest first); ``cost``: a group of vectors whose removed points would need a
-    kernel product larger than ``cost`` x N^2 per vector (n_removed x |C'|) is dropped, with every older
-    group: the product then costs more time than an FFT pair."""
-
-    def __init__(self, step, kmax, cost):
-        self.step = step
-        self.kmax = int(kmax)
-        self.cost = float(cost)
-        self.groups = []          # (idx, Z (k x |C| local), CZ (k x local grid)) per solve, newest last
-        self.kernel = None        # c applied to the unit impulse at (0, 0): full N x N on every rank
-        self.U = self.W = None    # recycle space on the current set (rows), W = A'U orthonormal
-        self.rec_z = []
-        self.rec_cz = []
-        self.recording = False
-
-    def _kernel(self):
-        if self.kernel is None:
-            s = self.step
-            fft = s.fft
-            d = fft.real_array()
-            if fft.row_start == 0:
-                d[0, 0] = 1.0
-            g = fft.apply(d, s.op.c)
-            self.kernel = np.concatenate(fft.comm.allgather(g), axis=0)
-        return self.kernel
-
-    def after_mult(self, xa, out, ya):
-        if self.recording and len(self.rec_z) < self.kmax:
-            self.rec_z.append(np.array(xa))
-            self.rec_cz.append(out.ravel().copy())
-        if self.W is not None:
-            ya -= self.W.T @ self.step.allsum(self.W @ ya)
-
-    def set_changed(self):
-        """New contact set: the space is mapped to it in prepare."""
-        self.U = self.W = None
-        if self.groups:
-            self.U = "stale"
-
-    def prepare(self, act, idx):
-        """U, W on the current set from the recorded groups (no FFT: the mean of each mapped vector is
-        removed with the mapped vector of largest mean, whose image is known too)."""
-        if self.U != "stale":
-            return
-        s = self.step
-        fft, comm, N = s.fft, s.comm, s.fft.N
-        Us, Ws = [], []
-        for g in range(len(self.groups) - 1, -1, -1):
-            gidx, Z, CZ = self.groups[g]
-            gone = ~act.ravel()[gidx]
-            n_gone = comm.allreduce(int(np.count_nonzero(gone)), op=MPI.SUM)
-            if n_gone * float(s.n_C) > self.cost * float(N) ** 2:
-                self.groups = self.groups[g + 1:]
-                break
-            loc = np.minimum(np.searchsorted(gidx, idx), gidx.size - 1)
-            present = gidx[loc] == idx
-            RZ = np.zeros((Z.shape[0], idx.size))
-            RZ[:, present] = Z[:, loc[present]]
-            AZ = CZ[:, idx]
-            if n_gone:
-                K = self._kernel()
-                pos = np.concatenate(comm.allgather(gidx[gone] + fft.row_start * N))
-                zr = np.concatenate(comm.allgather(Z[:, gone].T), axis=0)      # (n_gone, k)
-                rows = fft.row_start + idx // N
-                cols = idx % N
-                for a in range(0, pos.size, 64):
-                    pr, pc = pos[a:a + 64, None] // N, pos[a:a + 64, None] % N
-                    AZ -= zr[a:a + 64].T @ K[(rows - pr) % N, (cols - pc) % N]
-            Us.append(RZ)
-            Ws.append(AZ)
-        if not Us:
-            self.U = None
-            return
-        U = np.concatenate(Us, axis=0)
-        W = np.concatenate(Ws, axis=0)
-        mu = s.allsum(U.sum(axis=1)) / s.n_C
-        ref = int(np.argmax(np.abs(mu)))
-        if abs(mu[ref]) > 0:
-            f = mu / mu[ref]
-            U -= f[:, None] * U[ref]
-            W -= f[:, None] * W[ref]
-            U, W = np.delete(U, ref, axis=0), np.delete(W, ref, axis=0)
-        if W.shape[0] == 0:
-            self.U = None
-            return
-        W -= (s.allsum(W.sum(axis=1)) / s.n_C)[:, None]
-        lam, V = np.linalg.eigh(s.allsum(W @ W.T))
-        keep = lam > 1e-12 * lam[-1]
-        T = V[:, keep] / np.sqrt(lam[keep])
-        self.U, self.W = T.T @ U, T.T @ W
-
-    def start(self, b):
-        """Projected right-hand side r0 and initial guess y0 (None when there is no space)."""
-        self.rec_z, self.rec_cz, self.recording = [], [], True
-        if self.W is None:
-            return b, None
-        beta = self.step.allsum(self.W @ b)
-        return b - self.W.T @ beta, self.U.T @ beta
-
-    def finish(self, idx):
-        """Store this solve's directions as the newest group (at most kmax vectors in all)."""
-        self.recording = False
-        if self.rec_z:
-            self.groups.append((idx.copy(), np.array(self.rec_z), np.array(self.rec_cz)))
-        self.rec_z, self.rec_cz = [], []
-        total = 0
-        for i in range(len(self.groups) - 1, -1, -1):
-            total += self.groups[i][1].shape[0]
-            if total > self.kmax:
-                self.groups = self.groups[i + 1:]
-                break
 
 
 class ContactSetStep:
@@ -221,10 +92,6 @@ class ContactSetStep:
         self.iterations = 0
         self.solves = 0
         self._A = self._b = self._y = None
-        self.act = None
-        kmax = self.comm.allreduce(settings.recycle(int(np.prod(self.shape))), op=MPI.MIN)
-        self.recycler = _Recycler(self, kmax, settings.recycle_cost) if kmax > 0 else None
-        self._plain = _Restricted(self, op.c)
         self.ksp = PETSc.KSP().create(comm=self.comm)
         self._prefix = prefix + "contact_"
         self.ksp.setOptionsPrefix(self._prefix)
@@ -240,10 +107,6 @@ class ContactSetStep:
     def mean_C(self, a):
         """Mean over the (global) contact set of the C-vector ``a``."""
         return self.fft.sum(a) / self.n_C
-
-    def allsum(self, a):
-        """Sum over the ranks of the small array ``a``."""
-        return a if self.comm.size == 1 else self.comm.allreduce(a, op=MPI.SUM)
 
     def set_active(self, act, n_active):
         """New contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""
@@ -265,14 +128,11 @@ class ContactSetStep:
                 for obj in (self._A, self._b, self._y):
                     obj.destroy()
             self._A = PETSc.Mat().createPython(((n_loc, n_C), (n_loc, n_C)),
-                                               context=_Restricted(self, self.op.c, deflate=True), comm=self.comm)
+                                               context=_Restricted(self, self.op.c), comm=self.comm)
             self._A.setUp()
             self._b = self._A.createVecLeft()
             self._y = self._A.createVecRight()
         self.n_C = n_C
-        self.act = act
-        if self.recycler is not None:
-            self.recycler.set_changed()
         self.ksp.setOperators(self._A)
         if not self._configured:
             restart = self.comm.allreduce(self.settings.inner_restart(n_loc), op=MPI.MIN)
@@ -310,11 +170,8 @@ class ContactSetStep:
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
         self._y.set(0.0)
-        if self.recycler is None:
-            self.ksp.solve(self._b, self._y)
-            self.iterations += self.ksp.getIterationNumber()
-        else:
-            self.iterations += self._recycled_solve(self.recycler, b)
+        self.ksp.solve(self._b, self._y)
+        self.iterations += self.ksp.getIterationNumber()
         self.solves += 1
         w.flat[idx] += self._y.getArray(readonly=True)    # s
         fft.apply(w, self.op.c, xo)                       # c s
@@ -322,31 +179,6 @@ class ContactSetStep:
         # small gap error on C instead of turning into pressures (m rho) on F that upset the set
         e = self.mean_C(np.take(r.ravel(), idx) - np.take(xo.ravel(), idx))
         xo += e
-
-    def _recycled_solve(self, rc, b):
-        """The inner solve with the recycle space (see _Recycler); b: the array of self._b.  Returns
-        its Krylov iterations."""
-        rc.prepare(self.act, self.idx)
-        r0, y0 = rc.start(b.copy())
-        if y0 is None:
-            self.ksp.solve(self._b, self._y)
-            rc.finish(self.idx)
-            return self.ksp.getIterationNumber()
-        rtol, atol = self.ksp.getTolerances()[:2]
-        nb = np.sqrt(self.fft.sum(b * b))
-        nr = np.sqrt(self.fft.sum(r0 * r0))
-        its = 0
-        if nr > max(rtol * nb, atol):            # the space alone did not solve it
-            self.ksp.setTolerances(rtol=rtol * nb / nr)
-            b[...] = r0
-            self.ksp.solve(self._b, self._y)
-            its = self.ksp.getIterationNumber()
-            self.ksp.setTolerances(rtol=rtol)
-            self._plain._apply(self._y, self._b)          # A' t into b (one FFT pair)
-            y0 -= rc.U.T @ self.allsum(rc.W @ b)
-        rc.finish(self.idx)
-        self._y.getArray()[:] += y0
-        return its
 
     def release(self):
         for obj in (self._A, self._b, self._y, self.ksp):
@@ -375,7 +207,7 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, recycle_vectors=0))
+    step = ContactSetStep(op, op.kappa, PETSc, prefix, settings)
     r = y = None
     try:
         t0 = fft.transforms

@@ -29,6 +29,7 @@ __all__ = ["parse", "split_argv", "solver_items", "OptionError", "RETIRED"]
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?\Z")
 
+_RECYCLING = "removed with the Krylov recycling of the contact-set steps (it lost in wall time, benchmarks/RESULTS.md)"
 # (name, value or None for any value) -> what to use instead; one line each
 RETIRED = {
     ("contact_step", None): f"renamed -{PREFIX}contact_step",
@@ -36,6 +37,9 @@ RETIRED = {
                                  f"above -{PREFIX}contact_step_large_n)",
     ("snes_type", "vinewtonssls"): "removed (it did not converge with the compliance preconditioner); "
                                    "use the default newtonls or vinewtonrsls",
+    (f"{PREFIX}recycle_vectors", None): _RECYCLING,
+    (f"{PREFIX}recycle_memory", None): _RECYCLING,
+    (f"{PREFIX}recycle_cost", None): _RECYCLING,
 }
 
 

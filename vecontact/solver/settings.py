@@ -72,10 +72,6 @@ class SolverSettings:
     restart_memory: float = _knob(3e9, "bytes per rank for the grid steps' Krylov basis [RESULTS.md]",
                                   lo=0, lo_open=True)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
-    recycle_vectors: int = _knob(80, "Krylov vectors recycled across contact-set steps (0: off) [RESULTS.md]", lo=0)
-    recycle_memory: float = _knob(1.5e9, "bytes per rank for the recycled vectors' full fields c z", lo=0, lo_open=True)
-    recycle_cost: float = _knob(4.0, "recycled vectors dropped when their removed points cost > this x N^2 [RESULTS.md]",
-                                lo=0)
     inner_restart_memory: float = _knob(1.5e9, "bytes per rank for the inner FGMRES basis", lo=0, lo_open=True)
     restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
     # --- coarse grids and warm starts (contact.py, warmstart.py)
@@ -114,11 +110,6 @@ class SolverSettings:
     def inner_restart(self, n_local):
         """FGMRES restart of the inner solve of the contact-set steps (n_local: local contact points)."""
         return gmres_restart(n_local, self.inner_restart_memory, 2, self.inner_restart_max, self.restart_min)
-
-    def recycle(self, n_grid_local):
-        """Vectors recycled across contact-set steps: recycle_vectors, fewer if their fields (one grid of
-        ``n_grid_local`` doubles each) exceed recycle_memory (4096^2 on 2 ranks, 1.5 GB: 22)."""
-        return int(min(self.recycle_vectors, self.recycle_memory // (8 * max(n_grid_local, 1))))
 
     # ------------------------------------------------------------------ options
     def with_options(self, options):
