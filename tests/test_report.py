@@ -149,3 +149,39 @@ def test_inset_window_is_around_a_large_patch():
         contact[20 * k + 20, 100:100 + k] = 1         # patch: the 90th percentile skips the large one
     contact[0:40, 150:190] = 1
     assert patch_window(contact) == ((220 + 221 - 40) // 2, (100 + 110 - 40) // 2, 40)
+
+
+def test_study_cost_benchmark(study_files, tmp_path):
+    """benchmarks/study_cost.py: core-hours per N are the converged cases' seconds x ranks; a file
+    against itself differs by nothing; the grid total is null until every planned case is in."""
+    import json
+    import subprocess
+    import sys
+    script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks",
+                          "study_cost.py")
+    out = study_files / "out.h5"
+
+    def run(path, *extra):
+        p = subprocess.run([sys.executable, script, str(path), *extra], capture_output=True, text=True,
+                           timeout=120)
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout.strip().splitlines()[-1])
+
+    with h5py.File(out, "r") as f:
+        cases = f["cases"][()]
+    res = run(out, "--reference", str(out), "--n", "64")
+    for N in (64, 128):
+        ok = (cases["N"] == N) & (cases["converged"] == 1)
+        assert res["cases"][str(N)] == ok.sum() == res["planned"][str(N)] == 2 * 2 * 3
+        want = (cases["seconds"][ok] * cases["ranks"][ok]).sum() / 3600
+        assert abs(res["core_hours"][str(N)] - want) <= 1e-12 * want
+    assert res["core_hours_n"] == res["core_hours"]["64"]
+    assert res["compared"] == len(cases) and res["max_points"] == 0 and res["max_mu_rel"] == 0
+    partial = tmp_path / "partial.h5"
+    shutil.copy(out, partial)
+    with h5py.File(partial, "r+") as f:
+        keep = f["cases"][()][f["cases"]["N"] != 128]
+        del f["cases"]
+        f.create_dataset("cases", data=keep)
+    res = run(partial, "--n", "128")
+    assert res["core_hours_n"] is None and "128" not in res["cases"]

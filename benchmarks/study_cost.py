@@ -1,0 +1,104 @@
+"""What a sweep cost, per grid size and per code version, from its results file (issue #15).
+
+Usage (from the repository root):
+    python benchmarks/study_cost.py results/paper.h5 [--reference OTHER.h5] [--n 4096]
+
+Core-hours are the solver's own seconds times the ranks of each case (``/cases`` columns ``seconds``
+and ``ranks``: the solve, not the theory, the file or the farm's waits), summed over the converged
+cases; the code version of a row is the ``git_commit`` of its run in ``/runs`` (rows grouped by it).  With ``--reference``
+the cases converged in both files (same q1, seed, velocity and pressure) are compared: A/A0 in
+contact points (|dA| N^2) and mu relative.  Output: a table, then as LAST line one JSON object with
+``core_hours`` per N, converged ``cases`` and ``planned`` cases (the stored job's) per N,
+``core_hours_n`` (the grid of ``--n``; null until all its planned cases converged) and, with a reference, ``compared``, ``max_points`` and ``max_mu_rel``.
+"""
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from vecontact.io.results import open_for_reading  # noqa: E402
+from vecontact.jobtypes import AreaRange, Job  # noqa: E402
+
+KEY = ("q1", "seed", "velocity", "pressure")
+
+
+def load(path):
+    """(/cases structured array, {run index: git commit}, {N: cases the job plans}) of a results file."""
+    with open_for_reading(path) as f:
+        cases = f["cases"][()]
+        runs = {}
+        for raw in f["runs"][()]:
+            rec = json.loads(raw)
+            runs[int(rec["run"])] = str(rec.get("git_commit") or "?")[:10]
+        job = Job.from_dict(yaml.safe_load(f.attrs["job_yaml"]))
+    p = job.sweep.pressure
+    per_q1 = len(job.sweep.velocity) * (p.num if isinstance(p, AreaRange) else len(p))
+    planned = {}
+    for q1 in job.surface.q1:
+        N = job.surface.grid(q1)
+        planned[N] = planned.get(N, 0) + per_q1 * len(job.surface.realisations(q1))
+    return cases, runs, planned
+
+
+def cost(cases, runs):
+    """Rows (N, commit, converged, failed, core-hours, median FFT pairs) and the totals per N."""
+    rows, per_n, count = [], {}, {}
+    commit = np.array([runs.get(int(r), "?") for r in cases["run"]])
+    for N in np.unique(cases["N"]):
+        at_n = cases["N"] == N
+        for c in sorted(set(commit[at_n])):
+            m = at_n & (commit == c)
+            ok = m & (cases["converged"] == 1)
+            hours = float((cases["seconds"][ok] * cases["ranks"][ok]).sum() / 3600.0)
+            pairs = float(np.median(cases["fft_pairs"][ok])) if ok.any() else float("nan")
+            rows.append((int(N), c, int(ok.sum()), int((m & ~ok).sum()), hours, pairs))
+            per_n[int(N)] = per_n.get(int(N), 0.0) + hours
+            count[int(N)] = count.get(int(N), 0) + int(ok.sum())
+    return rows, per_n, count
+
+
+def compare(cases, ref):
+    """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu)."""
+    index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
+    n, points, mu = 0, 0.0, 0.0
+    for r in cases[cases["converged"] == 1]:
+        o = index.get(tuple(float(r[k]) for k in KEY))
+        if o is None:
+            continue
+        n += 1
+        points = max(points, abs(float(r["area"]) - float(o["area"])) * float(r["N"]) ** 2)
+        mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
+    return n, points, mu
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("results")
+    ap.add_argument("--reference", help="another results file of the same job: cases compared")
+    ap.add_argument("--n", type=int, default=4096, help="grid whose total is reported as core_hours_n")
+    args = ap.parse_args(argv)
+    cases, runs, planned = load(args.results)
+    rows, per_n, count = cost(cases, runs)
+    print(f"{'N':>5s} {'commit':10s} {'converged':>9s} {'failed':>6s} {'core-h':>8s} {'median pairs':>12s}")
+    for N, commit, ok, bad, hours, pairs in rows:
+        print(f"{N:5d} {commit:10s} {ok:9d} {bad:6d} {hours:8.2f} {pairs:12.1f}")
+    print("planned cases per N: " + ", ".join(f"{N}: {n}" for N, n in sorted(planned.items())))
+    complete = count.get(args.n, 0) == planned.get(args.n, -1)
+    out = dict(core_hours=per_n, cases=count, planned=planned, n=args.n,
+               core_hours_n=per_n.get(args.n) if complete else None)
+    if args.reference:
+        ref, _, _ = load(args.reference)
+        n, points, mu = compare(cases, ref)
+        print(f"against {args.reference}: {n} cases in both, max |dA| {points:.0f} points, max |dmu|/mu {mu:.1e}")
+        out.update(compared=n, max_points=points, max_mu_rel=mu)
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
