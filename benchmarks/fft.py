@@ -8,6 +8,12 @@ raw single-process pyfftw rfft2/irfft2 pair (pyfftw.builders, same planner flag,
 A separate fresh 2-rank run does one forward+backward pair at the largest N and reports the peak RSS
 per rank (resource.getrusage ru_maxrss).  Prints a table; the LAST line is one JSON object:
 {"overhead": t_1rank / t_raw at N=2048, "speedup": t_1rank / t_2rank at N=2048, ...}.
+
+``--breakdown N`` (issue #15: is the 2-rank pair slow in the transposes or in the local FFTs?) instead
+times, at one N, the stages of a 2-rank pair one by one (a barrier before each, the slowest rank
+counts, minimum over repeats): the row r2c, the Alltoallw of subarray datatypes, the column FFT, and
+back; next to them the same transpose done as numpy packing into contiguous blocks + ``Alltoall``; and,
+single-process, the raw pyfftw pair on 1 and on 2 threads.  Last line: JSON of every stage (ms).
 """
 import argparse
 import json
@@ -41,6 +47,11 @@ def worker(args):
     comm = MPI.COMM_WORLD
     flag = {"estimate": "FFTW_ESTIMATE", "measure": "FFTW_MEASURE", "patient": "FFTW_PATIENT"}[args.planner]
     out = {"size": comm.size, "results": []}
+    if args.breakdown:
+        out.update(_breakdown(comm, args.breakdown, args.planner, flag, args.budget))
+        if comm.rank == 0:
+            print("RESULT " + json.dumps(out), flush=True)
+        return
     if args.mem:
         N = args.mem
         t0 = time.perf_counter()
@@ -113,6 +124,91 @@ def worker(args):
         print("RESULT " + json.dumps(out), flush=True)
 
 
+def _stage_min(comm, fn, reps):
+    """Minimum over ``reps`` of the slowest rank's time of fn() (s), a barrier before each."""
+    import numpy as np
+    from mpi4py import MPI
+    ts = np.empty(reps)
+    for i in range(reps):
+        comm.Barrier()
+        t0 = time.perf_counter()
+        fn()
+        ts[i] = time.perf_counter() - t0
+    tmax = np.empty_like(ts)
+    comm.Allreduce(ts, tmax, op=MPI.MAX)
+    return float(tmax.min())
+
+
+def _breakdown(comm, N, planner, flag, budget):
+    """Stage times (ms) of a SlabFFT pair on this communicator (2 ranks), or of the raw pyfftw pair on 1
+    and 2 threads (1 rank)."""
+    import numpy as np
+    import pyfftw
+    import pyfftw.builders as builders
+    from mpi4py import MPI
+    from vecontact.core.pfft import SlabFFT
+    if comm.size == 1:
+        a = pyfftw.empty_aligned((N, N), dtype="float64")
+        a[...] = np.random.default_rng(0).standard_normal((N, N))
+        res = {}
+        for threads in (1, 2):
+            fwd = builders.rfft2(a, planner_effort=flag, threads=threads)
+            bwd = builders.irfft2(fwd.output_array, s=(N, N), planner_effort=flag, threads=threads)
+            t1 = _stage_min(comm, lambda: bwd(fwd(a)), 1)
+            res[f"raw_pair_{threads}thread_ms"] = 1e3 * _stage_min(comm, lambda: bwd(fwd(a)), _repeats(t1, budget))
+        return res
+    fft = SlabFFT(comm, N, threads=1, planner=planner)
+    x = fft.real_array()
+    x[...] = np.random.default_rng(comm.rank).standard_normal(x.shape)
+    mult = fft.fourier_array()
+    mult[...] = 1.0
+    y = fft.real_array()
+    A, B = fft._A, fft._B
+    # the transpose by hand: my columns of every rank's block packed contiguous, Alltoall, unpacked
+    cols = fft._cols
+    send = np.empty(A.size, dtype=A.dtype)
+    recv = np.empty(B.size, dtype=B.dtype)
+    counts = [fft.nrows * (c1 - c0) for c0, c1 in cols]
+    rows = comm.allgather(fft.nrows)
+    rcounts = [r * fft.ncols for r in rows]
+
+    def packed():
+        off = 0
+        for c0, c1 in cols:
+            n = fft.nrows * (c1 - c0)
+            send[off:off + n].reshape(fft.nrows, c1 - c0)[...] = A[:, c0:c1]
+            off += n
+        comm.Alltoallv([send, (counts, np.cumsum([0] + counts[:-1]))],
+                       [recv, (rcounts, np.cumsum([0] + rcounts[:-1]))])
+        off = 0
+        r0 = 0
+        for r in rows:
+            B[r0:r0 + r, :] = recv[off:off + r * fft.ncols].reshape(r, fft.ncols)
+            off += r * fft.ncols
+            r0 += r
+
+    stages = {
+        "pair": lambda: fft.apply(x, mult, y),
+        "r2c_rows": lambda: fft._p_r2c.update_arrays(x, A) or fft._p_r2c.execute(),
+        "transpose_alltoallw": fft._a2b,
+        "fft_columns": fft._p_xf_ip.execute,
+        "ifft_columns": fft._p_xb_ip.execute,
+        "transpose_back_alltoallw": fft._b2a,
+        "c2r_rows": lambda: fft._p_c2r.update_arrays(A, y) or fft._p_c2r.execute(),
+        "transpose_packed_alltoallv": packed,
+    }
+    stages["r2c_rows"]()
+    fft._a2b()
+    want = B.copy()
+    packed()
+    same = comm.allreduce(bool(np.array_equal(B, want)), op=MPI.LAND)
+    if not same:
+        raise RuntimeError("the packed transpose does not reproduce the Alltoallw one")
+    t1 = _stage_min(comm, stages["pair"], 1)
+    reps = _repeats(t1, budget)
+    return {f"{k}_ms": 1e3 * _stage_min(comm, fn, reps) for k, fn in stages.items()}
+
+
 def launch(n, extra):
     sys.path.insert(0, os.path.join(ROOT, "tests"))
     from mpi_util import run_mpi  # noqa: E402
@@ -133,6 +229,8 @@ def main():
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--raw", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--mem", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--breakdown", type=int, default=0, metavar="N",
+                    help="stage times of a 2-rank pair at N (see above) instead of the size table")
     args = ap.parse_args()
     args.sizes = [int(s) for s in args.sizes.split(",") if s]
     if args.worker:
@@ -145,6 +243,20 @@ def main():
             sys.stderr.flush()
             MPI.COMM_WORLD.Abort(1)
 
+    if args.breakdown:
+        extra = ["--breakdown", str(args.breakdown), "--planner", args.planner, "--budget", str(args.budget)]
+        one, two = launch(1, extra), launch(2, extra)
+        res = {k: round(v, 3) for k, v in {**one, **two}.items() if k.endswith("_ms")}
+        print(f"N={args.breakdown}, planner={args.planner}: minimum stage times (ms), 2 ranks unless marked")
+        for k, v in res.items():
+            print(f"  {k[:-3]:28s} {v:10.2f}")
+        two_ranks = res["pair_ms"]
+        res.update(N=args.breakdown, speedup_2ranks=round(res["raw_pair_1thread_ms"] / two_ranks, 3),
+                   speedup_2threads=round(res["raw_pair_1thread_ms"] / res["raw_pair_2thread_ms"], 3),
+                   transpose_share=round((res["transpose_alltoallw_ms"] + res["transpose_back_alltoallw_ms"])
+                                         / two_ranks, 3))
+        print(json.dumps(res))
+        return
     common = ["--sizes", ",".join(map(str, args.sizes)), "--planner", args.planner, "--budget", str(args.budget)]
     r1 = launch(1, common + ["--raw"])
     r2 = launch(2, common)
