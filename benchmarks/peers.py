@@ -100,8 +100,8 @@ class Driver:
         self._err.close()
 
 
-def open_peers(python, tmpdir):
-    """(Driver or None, probe dict, available peer codes, message)."""
+def open_peers(python, tmpdir, wanted=("tamaas", "cm")):
+    """(Driver or None, probe dict, available peer codes among ``wanted``, message)."""
     if not python or not os.path.isfile(python) or not os.access(python, os.X_OK):
         return None, {}, [], (f"peers: skipped (no environment at {python}; "
                                f"see benchmarks/PEERS.md to create it)")
@@ -113,7 +113,9 @@ def open_peers(python, tmpdir):
         return None, {}, [], f"peers: skipped (environment at {python} does not run the driver: {e})"
     codes, msgs = [], []
     for code, key in (("tamaas", "tamaas"), ("cm", "cm")):
-        if key in probe:
+        if code not in wanted:
+            msgs.append(f"{PEER_NAMES[code]}: skipped (not in --peers)")
+        elif key in probe:
             codes.append(code)
         else:
             msgs.append(f"{PEER_NAMES[code]}: skipped ({probe.get(key + '_error')})")
@@ -360,12 +362,18 @@ def main():
     ap.add_argument("--calib-steps", type=int, default=3)
     ap.add_argument("--planner", default="measure", help="vecontact's FFTW planner")
     ap.add_argument("--maxiter", type=int, default=100000, help="peers' iteration cap")
+    ap.add_argument("--peers", default="tamaas,cm",
+                    help="comma list of the peers to run (tamaas, cm); the others are reported as skipped")
     ap.add_argument("--count-check", action="store_true",
                     help="first verify Tamaas's FFT pairs = 2 it + 1 under gdb (N = 128), then go on")
     args = ap.parse_args()
     args.sizes = [int(x) for x in args.sizes.split(",") if x]
     args.areas = [float(x) for x in args.areas.split(",") if x]
     args.ladder = sorted((float(x) for x in args.ladder.split(",") if x), reverse=True)
+    args.peers = [x.strip() for x in args.peers.split(",") if x.strip()]
+    unknown = sorted(set(args.peers) - set(PEER_NAMES))
+    if unknown:
+        ap.error(f"--peers: unknown peer {unknown[0]!r} (tamaas, cm)")
     sys.path.insert(0, ROOT)
     import numpy as np
 
@@ -375,7 +383,7 @@ def main():
                 fh.write(json.dumps(rec) + "\n")
 
     tmpdir = tempfile.mkdtemp(prefix="vecontact-peers-")
-    drv, probe, codes, msg = open_peers(args.peers_python, tmpdir)
+    drv, probe, codes, msg = open_peers(args.peers_python, tmpdir, args.peers)
     print(msg, flush=True)
     print(f"# single-threaded: OMP/OPENBLAS/MKL_NUM_THREADS=1, FFTW 1 thread, vecontact on 1 rank; "
           f"E={E_YOUNG:g} Pa nu={NU:g}; ladder {','.join(f'{t:g}' for t in args.ladder)}; reference "
