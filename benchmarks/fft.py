@@ -146,7 +146,7 @@ def _breakdown(comm, N, planner, flag, budget):
     import pyfftw
     import pyfftw.builders as builders
     from mpi4py import MPI
-    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.pfft import SlabFFT, _run
     if comm.size == 1:
         a = pyfftw.empty_aligned((N, N), dtype="float64")
         a[...] = np.random.default_rng(0).standard_normal((N, N))
@@ -189,12 +189,12 @@ def _breakdown(comm, N, planner, flag, budget):
 
     stages = {
         "pair": lambda: fft.apply(x, mult, y),
-        "r2c_rows": lambda: fft._p_r2c.update_arrays(x, A) or fft._p_r2c.execute(),
+        "r2c_rows": lambda: _run(fft._p_r2c, x, A),
         "transpose_alltoallw": fft._a2b,
         "fft_columns": fft._p_xf_ip.execute,
         "ifft_columns": fft._p_xb_ip.execute,
         "transpose_back_alltoallw": fft._b2a,
-        "c2r_rows": lambda: fft._p_c2r.update_arrays(A, y) or fft._p_c2r.execute(),
+        "c2r_rows": lambda: _run(fft._p_c2r, A, y),
         "transpose_packed_alltoallv": packed,
     }
     stages["r2c_rows"]()

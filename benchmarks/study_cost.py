@@ -17,32 +17,25 @@ import os
 import sys
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from vecontact.io.results import open_for_reading  # noqa: E402
-from vecontact.jobtypes import AreaRange, Job  # noqa: E402
+from vecontact.status import read_status  # noqa: E402
 
 KEY = ("q1", "seed", "velocity", "pressure")
 
 
 def load(path):
-    """(/cases structured array, {run index: git commit}, {N: cases the job plans}) of a results file."""
-    with open_for_reading(path) as f:
-        cases = f["cases"][()]
-        runs = {}
-        for raw in f["runs"][()]:
-            rec = json.loads(raw)
-            runs[int(rec["run"])] = str(rec.get("git_commit") or "?")[:10]
-        job = Job.from_dict(yaml.safe_load(f.attrs["job_yaml"]))
-    p = job.sweep.pressure
-    per_q1 = len(job.sweep.velocity) * (p.num if isinstance(p, AreaRange) else len(p))
+    """(/cases structured array, {run index: git commit}, {N: cases the job plans}) of a results file
+    (read by :func:`vecontact.status.read_status`)."""
+    st = read_status(path)
+    runs = {int(r["run"]): str(r.get("git_commit") or "?")[:10] for r in st["runs"]}
+    q1s = [q1 for q1, *_ in st["expected"]]
+    grids = {q1: st["job"].surface.grid(q1) for q1 in set(q1s)}    # once per q1 (a height file is read)
     planned = {}
-    for q1 in job.surface.q1:
-        N = job.surface.grid(q1)
-        planned[N] = planned.get(N, 0) + per_q1 * len(job.surface.realisations(q1))
-    return cases, runs, planned
+    for q1 in q1s:
+        planned[grids[q1]] = planned.get(grids[q1], 0) + 1
+    return st["cases"], runs, planned
 
 
 def cost(cases, runs):

@@ -20,6 +20,7 @@ from vecontact import job as jobs
 from vecontact.errors import InputError
 from vecontact.io.psd import read_psd
 from vecontact.io.tables import read_columns
+from vecontact.jobtypes import fft_size
 from vecontact.physics.modulus import HavriliakNegami, Table, coverage
 from vecontact.physics.spectrum import SelfAffine, Tabulated, isotropic_from_line, line_psd
 from vecontact.physics.theory import persson
@@ -135,7 +136,7 @@ def test_psd_job_system_size_and_grid(tmp_path):
     raw["surface"].update(q1=[10 * Q0], length=2 * math.pi / (2 * Q0))
     job = jobs.resolve(copy.deepcopy(raw), str(tmp_path))
     assert job.surface.grids() == {repr(10 * Q0): 20}             # 2 * 2 * 10 / 2 = 20 -> 5 * 4
-    assert [jobs.fft_size(n) for n in (3, 4, 7, 100, 129, 1000, 1025)] == [4, 4, 8, 128, 160, 1024, 1280]
+    assert [fft_size(n) for n in (3, 4, 7, 100, 129, 1000, 1025)] == [4, 4, 8, 128, 160, 1024, 1280]
     from vecontact.runner import spectra
     from mpi4py import MPI
     band = spectra(job, MPI.COMM_SELF)[10 * Q0]                   # the system's band of the table

@@ -18,8 +18,7 @@ import numpy as np
 import yaml
 
 from vecontact.errors import InputError
-from vecontact.jobtypes import (Job, Material, Numerics, Surface, Sweep, Theory, fft_size,  # noqa: F401
-                                grid_points, nyquist_points)
+from vecontact.jobtypes import Job, Material, Numerics, Surface, Sweep, Theory, grid_points, nyquist_points
 from vecontact.solver.options import parse as parse_petsc
 
 MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
