@@ -3,7 +3,7 @@
 Usage (from the repository root):
     python benchmarks/solver.py [--max-n 4096] [--quick] [--ranks 2] [--areas 0.01,0.05,0.3]
                                 [--velocities 0.01,10] [--no-pk] [--out results.jsonl]
-                                [--areas-4096 0.05] [--pk-max-n 2048]
+                                [--areas-4096 0.05] [--pk-max-n 2048] [--blas LIBDIR]
 
 Starts its own MPI runs (``mpiexec -n RANKS python benchmarks/solver.py --worker N ...``), one per grid
 size, on the paper's surfaces (docs/conventions.md §2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
@@ -25,8 +25,11 @@ Output: a table, then as LAST line one JSON object:
                        included) / (the oracle solve's FFT pairs): the oracle solve (issue #15) is one
                        Newton step on the case's final contact set from a uniform pressure, its inner
                        FGMRES run to --oracle-rtol (contactset.oracle_solve)
-plus the medians and the targets.  ``--quick`` runs only A/A0 ~ 5 % and v = 0.01 and 10 without PK at
-4096.
+plus the medians and the targets.  With ``--blas LIBDIR`` every N runs twice, with the BLAS PETSc links
+and with LIBDIR's libblas.so.3 first on LD_LIBRARY_PATH; the headline figures are the first run's, and
+``blas`` gives the other's time_per_pair_ratio, the libraries each run actually mapped, and per case its
+seconds, pairs and seconds per pair over the reference's.  ``--quick`` runs only A/A0 ~ 5 % and v = 0.01
+and 10 without PK at 4096.
 """
 import argparse
 import json
@@ -112,7 +115,8 @@ def worker(args):
             sig = s * erfinv(area)
         return sig
 
-    emit(dict(kind="fft", N=N, ranks=comm.size, t_pair=t_pair, t_pair_median=t_pair_median, t_setup=t_setup))
+    emit(dict(kind="fft", N=N, ranks=comm.size, t_pair=t_pair, t_pair_median=t_pair_median, t_setup=t_setup,
+              blas_lib=_loaded_blas()))
     pk_done = {}
     for area in args.areas:
         for v in args.velocities:
@@ -138,6 +142,13 @@ def worker(args):
             emit(dict(kind="pk", N=N, ranks=comm.size, v=0.0, target=area, sigma0=sig, area=r.area,
                       converged=r.converged, residual=r.residual, iterations=r.iterations,
                       pairs=r.fft_pairs, seconds=r.seconds, t_pair=t_pair, reason=r.reason))
+
+
+def _loaded_blas():
+    """Path of the BLAS library mapped into this process (proof of what --blas actually loaded)."""
+    with open("/proc/self/maps") as fh:
+        libs = {line.split()[-1] for line in fh if "blas" in line.rsplit("/", 1)[-1]}
+    return ",".join(sorted(libs)) or None
 
 
 # -------------------------------------------------------------------------------------------- main
@@ -175,6 +186,9 @@ def main():
                     help="PETSc / -vc_ options of every viscoelastic solve, e.g. '-vc_lin_rtol 0.3'")
     ap.add_argument("--out", default=None, help="also append the raw RESULT records (JSON lines) here")
     ap.add_argument("--timeout", type=float, default=7200.0, help="per MPI run (s)")
+    ap.add_argument("--blas", default=None, metavar="LIBDIR",
+                    help="run every N twice, with the BLAS PETSc links (reference) and with the libblas.so.3 "
+                         "in LIBDIR first on LD_LIBRARY_PATH (e.g. Debian's OpenBLAS), and compare")
     args = ap.parse_args()
     args.areas = [float(x) for x in args.areas.split(",")]
     args.velocities = [float(x) for x in args.velocities.split(",")]
@@ -191,6 +205,7 @@ def main():
     env = dict(os.environ)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     env.setdefault("OMP_NUM_THREADS", "1")
+    variants = [("reference", None), (args.blas, args.blas)] if args.blas else [(None, None)]
     for N in sizes:
         ranks = 2 if N >= 4096 else args.ranks
         cmd = [_mpiexec(), "-n", str(ranks), sys.executable, os.path.abspath(__file__), "--worker",
@@ -205,32 +220,12 @@ def main():
             cmd.append("--quick")
         if not args.pk or N > args.pk_max_n:
             cmd.append("--no-pk")
-        print(f"# N={N} on {ranks} ranks ...", flush=True)
-        t = time.time()
-        # each case's row as soon as the worker prints it (a 2048^2 run takes many minutes);
-        # stderr to a file so that a full pipe cannot stall the worker
-        with tempfile.TemporaryFile("w+") as errf:
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=errf, text=True, env=env, cwd=ROOT)
-            timer = threading.Timer(args.timeout, proc.kill)
-            timer.start()
-            for line in proc.stdout:
-                if line.startswith("RESULT "):
-                    rec = json.loads(line[7:])
-                    records.append(rec)
-                    if args.out:
-                        with open(args.out, "a") as fh:
-                            fh.write(json.dumps(rec) + "\n")
-                    _print_row(rec)
-            proc.wait()
-            if not timer.is_alive():
-                print(f"# N={N}: TIMEOUT after {args.timeout:.0f} s", flush=True)
-            timer.cancel()
-            errf.seek(0)
-            err = errf.read()
-        if proc.returncode != 0:
-            failed.append(N)
-            print(f"# N={N}: worker failed ({proc.returncode}):\n{err[-3000:]}", flush=True)
-        print(f"# N={N} done in {time.time() - t:.0f} s", flush=True)
+        for label, libdir in variants:
+            venv = dict(env)
+            if libdir:
+                venv["LD_LIBRARY_PATH"] = libdir + os.pathsep + env.get("LD_LIBRARY_PATH", "")
+            if not _run_worker(cmd, venv, N, ranks, label, args, records):
+                failed.append(N)
     summary = summarise(records)
     summary["workers_failed"] = failed
     summary["all_converged"] = summary["all_converged"] and not failed
@@ -239,10 +234,43 @@ def main():
         raise SystemExit(1)
 
 
+def _run_worker(cmd, env, N, ranks, label, args, records):
+    """One MPI run of the worker; its RESULT records (tagged with the BLAS label) go to ``records``."""
+    tag = f" [BLAS {label}]" if label else ""
+    print(f"# N={N} on {ranks} ranks{tag} ...", flush=True)
+    t = time.time()
+    # each case's row as soon as the worker prints it (a 2048^2 run takes many minutes);
+    # stderr to a file so that a full pipe cannot stall the worker
+    with tempfile.TemporaryFile("w+") as errf:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=errf, text=True, env=env, cwd=ROOT)
+        timer = threading.Timer(args.timeout, proc.kill)
+        timer.start()
+        for line in proc.stdout:
+            if line.startswith("RESULT "):
+                rec = json.loads(line[7:])
+                rec["blas"] = label
+                records.append(rec)
+                if args.out:
+                    with open(args.out, "a") as fh:
+                        fh.write(json.dumps(rec) + "\n")
+                _print_row(rec)
+        proc.wait()
+        if not timer.is_alive():
+            print(f"# N={N}: TIMEOUT after {args.timeout:.0f} s", flush=True)
+        timer.cancel()
+        errf.seek(0)
+        err = errf.read()
+    print(f"# N={N}{tag} done in {time.time() - t:.0f} s", flush=True)
+    if proc.returncode != 0:
+        print(f"# N={N}: worker failed ({proc.returncode}):\n{err[-3000:]}", flush=True)
+        return False
+    return True
+
+
 def _print_row(r):
     if r["kind"] == "fft":
         print(f"{'fft':5s} N={r['N']:5d} ranks={r['ranks']} raw pair {r['t_pair'] * 1e3:8.2f} ms (min; median "
-              f"{r.get('t_pair_median', float('nan')) * 1e3:.2f} ms)", flush=True)
+              f"{r.get('t_pair_median', float('nan')) * 1e3:.2f} ms) BLAS {r.get('blas_lib')}", flush=True)
         return
     tpp = r["seconds"] / max(r["pairs"], 1e-9) / r["t_pair"]
     extra = ""
@@ -257,6 +285,30 @@ def _print_row(r):
 
 
 def summarise(records):
+    """The JSON summary; with --blas the headline figures are the reference BLAS's and ``blas`` compares."""
+    out = _summarise_one([r for r in records if r.get("blas") in (None, "reference")])
+    labels = sorted({r["blas"] for r in records if r.get("blas") not in (None, "reference")})
+    if labels:
+        ref = {(r["N"], r["v"], r["target"]): r for r in records if r["kind"] == "snes" and r["blas"] == "reference"}
+        out["blas"] = {}
+        for lab in labels:
+            alt = [r for r in records if r.get("blas") == lab]
+            cases = [dict(N=r["N"], v=r["v"], target=r["target"], seconds_ratio=r["seconds"] / ref[k]["seconds"],
+                          pairs_ratio=r["pairs"] / ref[k]["pairs"],
+                          tpp_ratio=(r["seconds"] / r["pairs"]) / (ref[k]["seconds"] / ref[k]["pairs"]))
+                     for r in alt if r["kind"] == "snes" and (k := (r["N"], r["v"], r["target"])) in ref]
+            one = _summarise_one(alt)
+            out["blas"][lab] = dict(time_per_pair_ratio=one["time_per_pair_ratio"],
+                                    time_per_pair_ratio_median=one["time_per_pair_ratio_median"],
+                                    loaded=sorted({r.get("blas_lib") for r in alt if r["kind"] == "fft"}),
+                                    cases=cases)
+            for c in cases:
+                print(f"BLAS {lab} / reference: N={c['N']} v={c['v']:g} target={c['target']:g} seconds "
+                      f"{c['seconds_ratio']:.3f} pairs {c['pairs_ratio']:.3f} seconds per pair {c['tpp_ratio']:.3f}")
+    return out
+
+
+def _summarise_one(records):
     sn = [r for r in records if r["kind"] == "snes"]
     pk = {(r["N"], r["target"]): r for r in records if r["kind"] == "pk"}
     ratios, iratios, tpp = [], [], []

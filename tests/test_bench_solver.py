@@ -1,0 +1,57 @@
+"""benchmarks/solver.py's summary: the headline ratios, and the side-by-side BLAS comparison (--blas)."""
+import importlib.util
+import os
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_solver", os.path.join(ROOT, "benchmarks", "solver.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _snes(N, v, target, pairs, seconds, t_pair, overhead, blas):
+    return dict(kind="snes", N=N, v=v, target=target, pairs=pairs, seconds=seconds, t_pair=t_pair,
+                overhead=overhead, converged=True, oracle_converged=True, blas=blas)
+
+
+def test_summary_without_blas(bench):
+    recs = [_snes(1024, 10, 0.05, 100.0, 3.0, 0.02, 2.5, None),
+            _snes(2048, 10, 0.05, 200.0, 12.0, 0.04, 3.5, None),
+            _snes(512, 10, 0.05, 80.0, 1.0, 0.005, 1.5, None)]
+    out = bench.summarise(recs)
+    assert out["time_per_pair_ratio"] == pytest.approx(1.5, rel=1e-12)          # 12 / (200 * 0.04)
+    assert out["time_per_pair_ratio_median"] == pytest.approx(1.5, rel=1e-12)   # 1.5 and 1.5 at N >= 1024
+    assert out["overhead_max"] == 3.5 and "blas" not in out
+    assert out["pairs_growth"] == pytest.approx(200.0 / 80.0, rel=1e-12)
+
+
+def test_summary_compares_blas_side_by_side(bench, capsys):
+    lib = "/opt/openblas"
+    recs = [dict(kind="fft", N=2048, t_pair=0.04, blas="reference", blas_lib="/usr/lib/blas/libblas.so.3"),
+            _snes(2048, 10, 0.05, 200.0, 12.0, 0.04, 3.5, "reference"),
+            dict(kind="fft", N=2048, t_pair=0.04, blas=lib, blas_lib=lib + "/libopenblas.so.0"),
+            _snes(2048, 10, 0.05, 210.0, 10.5, 0.04, 3.6, lib)]
+    out = bench.summarise(recs)
+    # the headline figures are the reference BLAS's
+    assert out["time_per_pair_ratio"] == pytest.approx(1.5, rel=1e-12) and out["overhead_max"] == 3.5
+    alt = out["blas"][lib]
+    assert alt["loaded"] == [lib + "/libopenblas.so.0"]
+    assert alt["time_per_pair_ratio"] == pytest.approx(10.5 / (210 * 0.04), rel=1e-12)
+    (c,) = alt["cases"]
+    assert c["seconds_ratio"] == pytest.approx(10.5 / 12.0, rel=1e-12)
+    assert c["pairs_ratio"] == pytest.approx(1.05, rel=1e-12)
+    assert c["tpp_ratio"] == pytest.approx((10.5 / 210) / (12.0 / 200), rel=1e-12)
+    assert "BLAS /opt/openblas / reference: N=2048" in capsys.readouterr().out
+
+
+def test_loaded_blas_names_petsc_blas(bench):
+    """The worker's proof of which BLAS ran: once PETSc is loaded, its BLAS is among the mapped libraries."""
+    from petsc4py import PETSc  # noqa: F401  (maps libpetsc and the libblas.so.3 it links)
+    libs = bench._loaded_blas().split(",")
+    assert any(os.path.basename(p).startswith(("libblas", "libopenblas")) for p in libs), libs
