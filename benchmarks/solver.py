@@ -20,6 +20,10 @@ Output: a table, then as LAST line one JSON object:
   pairs_growth         max over (v, A/A0) of pairs(N_max) / pairs(512)
   time_per_pair_ratio  max over N >= 1024 of solver seconds / (fft_pairs x raw pair seconds); the raw
                        pair is the minimum of --fft-repeats timings (the median is printed too)
+                       = (solver seconds / seconds inside SlabFFT.apply) x (seconds inside apply /
+                       (fft_pairs x raw pair)): the two factors' maxima over N >= 1024 are
+                       solve_over_pairs_max (the work outside the pairs) and pair_in_solve_ratio_max (a
+                       pair inside the solve against the raw pair; coarse-grid pairs at their own cost)
   seconds_4096         wall time of the 4096^2, A/A0 ~ 5 % solve on 2 ranks (max over v)
   overhead_max         max over the cases of (the solve's FFT pairs, fine-grid equivalents, coarse grids
                        included) / (the oracle solve's FFT pairs): the oracle solve (issue #15) is one
@@ -55,7 +59,7 @@ def worker(args):
     import numpy as np
     from mpi4py import MPI
     from scipy.special import erfinv
-    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.pfft import SlabFFT, apply_seconds
     from vecontact.core.surface import generate
     from vecontact.physics.modulus import Elastic, HavriliakNegami
     from vecontact.physics.spectrum import SelfAffine
@@ -121,14 +125,17 @@ def worker(args):
     for area in args.areas:
         for v in args.velocities:
             sig = calibrate(hn, v, area)
+            s0 = apply_seconds()
             r = solve_contact(fft, L, h, hn, v, sig, tolerance=args.tol, store=("pressure",),
                               petsc_options=args.petsc)
+            pair_seconds = comm.allreduce(apply_seconds() - s0, op=MPI.MAX)
             orc = oracle_solve(ContactOperator(fft, L, hn, v, sig, h), r.pressure > 0, args.oracle_rtol,
                                args.oracle_max_it, SolverSettings())
             emit(dict(kind="snes", N=N, ranks=comm.size, v=v, target=area, sigma0=sig, area=r.area,
                       mu=r.mu, mu_geometric=r.mu_geometric, converged=r.converged, residual=r.residual,
                       iterations=r.iterations, linear_iterations=r.linear_iterations,
                       pairs=r.fft_pairs, by_level=r.fft_pairs_by_level, seconds=r.seconds,
+                      pair_seconds=pair_seconds,
                       t_pair=t_pair, levels=r.diagnostics["levels"], reason=r.reason,
                       lin_history=r.diagnostics["linear_history"],
                       set_changes=r.diagnostics["active_set_changes"],
@@ -277,7 +284,9 @@ def _print_row(r):
     if r["kind"] == "snes":
         lv = " ".join(f"{k}:{v:.0f}" for k, v in r["by_level"].items())
         extra = (f" lin={r['linear_iterations']:4d} mu={r['mu']:.6f} mu_geo={r['mu_geometric']:.4f} [{lv}]"
-                 f" oracle it={r['oracle_iterations']} pairs={r['oracle_pairs']:.0f} overhead={r['overhead']:.2f}")
+                 f" oracle it={r['oracle_iterations']} pairs={r['oracle_pairs']:.0f} overhead={r['overhead']:.2f}"
+                 f" in_pairs={r['pair_seconds'] / r['seconds']:.3f}"
+                 f" pair_in_solve/raw={r['pair_seconds'] / (r['pairs'] * r['t_pair']):.2f}")
     print(f"{r['kind']:5s} N={r['N']:5d} ranks={r['ranks']} v={r['v']:<5g} target={r['target']:<5g} "
           f"A/A0={r['area']:.4f} it={r['iterations']:5d} pairs={r['pairs']:8.1f} "
           f"t={r['seconds']:8.2f}s t/(pairs*pair)={tpp:5.2f} conv={r['converged']} res={r['residual']:.1e}"
@@ -311,7 +320,7 @@ def summarise(records):
 def _summarise_one(records):
     sn = [r for r in records if r["kind"] == "snes"]
     pk = {(r["N"], r["target"]): r for r in records if r["kind"] == "pk"}
-    ratios, iratios, tpp = [], [], []
+    ratios, iratios, tpp, outside, inside = [], [], [], [], []
     for r in sn:
         if r["N"] >= 1024 and (r["N"], r["target"]) in pk:
             p = pk[(r["N"], r["target"])]
@@ -319,6 +328,9 @@ def _summarise_one(records):
             iratios.append(r["pairs"] / max(p["iterations"], 1))
         if r["N"] >= 1024:
             tpp.append(r["seconds"] / (r["pairs"] * r["t_pair"]))
+            if r.get("pair_seconds"):
+                outside.append(r["seconds"] / r["pair_seconds"])
+                inside.append(r["pair_seconds"] / (r["pairs"] * r["t_pair"]))
     sizes = sorted({r["N"] for r in sn})
     growth = []
     if sizes:
@@ -336,6 +348,8 @@ def _summarise_one(records):
         pairs_growth_sizes=[sizes[0], sizes[-1]] if sizes else None,
         time_per_pair_ratio=max(tpp) if tpp else None,
         time_per_pair_ratio_median=median(tpp) if tpp else None,
+        solve_over_pairs_max=max(outside) if outside else None,
+        pair_in_solve_ratio_max=max(inside) if inside else None,
         seconds_4096=max(s4096) if s4096 else None,
         overhead_max=max(r["overhead"] for r in sn) if sn else None,
         overhead_median=median([r["overhead"] for r in sn]) if sn else None,

@@ -15,18 +15,21 @@ def bench():
     return mod
 
 
-def _snes(N, v, target, pairs, seconds, t_pair, overhead, blas):
+def _snes(N, v, target, pairs, seconds, t_pair, overhead, blas, pair_seconds=None):
     return dict(kind="snes", N=N, v=v, target=target, pairs=pairs, seconds=seconds, t_pair=t_pair,
-                overhead=overhead, converged=True, oracle_converged=True, blas=blas)
+                overhead=overhead, converged=True, oracle_converged=True, blas=blas, pair_seconds=pair_seconds)
 
 
 def test_summary_without_blas(bench):
-    recs = [_snes(1024, 10, 0.05, 100.0, 3.0, 0.02, 2.5, None),
-            _snes(2048, 10, 0.05, 200.0, 12.0, 0.04, 3.5, None),
-            _snes(512, 10, 0.05, 80.0, 1.0, 0.005, 1.5, None)]
+    recs = [_snes(1024, 10, 0.05, 100.0, 3.0, 0.02, 2.5, None, pair_seconds=2.5),
+            _snes(2048, 10, 0.05, 200.0, 12.0, 0.04, 3.5, None, pair_seconds=10.0),
+            _snes(512, 10, 0.05, 80.0, 1.0, 0.005, 1.5, None, pair_seconds=0.5)]
     out = bench.summarise(recs)
     assert out["time_per_pair_ratio"] == pytest.approx(1.5, rel=1e-12)          # 12 / (200 * 0.04)
     assert out["time_per_pair_ratio_median"] == pytest.approx(1.5, rel=1e-12)   # 1.5 and 1.5 at N >= 1024
+    # the two factors of the ratio (N >= 1024 only): outside the pairs 3/2.5 and 12/10, inside 2.5/2, 10/8
+    assert out["solve_over_pairs_max"] == pytest.approx(1.2, rel=1e-12)
+    assert out["pair_in_solve_ratio_max"] == pytest.approx(1.25, rel=1e-12)
     assert out["overhead_max"] == 3.5 and "blas" not in out
     assert out["pairs_growth"] == pytest.approx(200.0 / 80.0, rel=1e-12)
 

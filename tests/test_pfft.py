@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from mpi_util import run_mpi
-from vecontact.core.pfft import SlabFFT, column_split, split_range
+from vecontact.core.pfft import SlabFFT, apply_seconds, column_split, split_range
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "scripts"))
@@ -70,6 +70,24 @@ def test_no_allocation_in_hot_path():
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert peak < 8 * N * N / 4, peak  # far below one N x N array: only small Python objects
+
+
+def test_apply_seconds_counts_apply_only():
+    """apply_seconds(): the wall time inside apply, over all instances; forward/backward are not in it."""
+    import time
+    a = SlabFFT(MPI.COMM_SELF, 64, planner="estimate", wisdom_file=False)
+    b = SlabFFT(MPI.COMM_SELF, 32, planner="estimate", wisdom_file=False)
+    xa, xb = a.real_array(), b.real_array()
+    s0 = apply_seconds()
+    t0 = time.perf_counter()
+    for _ in range(5):
+        a.apply(xa, 2.0, xa)
+        b.apply(xb, 2.0, xb)
+    wall = time.perf_counter() - t0
+    s1 = apply_seconds()
+    assert 0.0 < s1 - s0 <= wall
+    a.forward(xa), a.backward(a.fourier_array())
+    assert apply_seconds() == s1
 
 
 def test_wisdom_file(tmp_path):
