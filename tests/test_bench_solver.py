@@ -58,3 +58,37 @@ def test_loaded_blas_names_petsc_blas(bench):
     from petsc4py import PETSc  # noqa: F401  (maps libpetsc and the libblas.so.3 it links)
     libs = bench._loaded_blas().split(",")
     assert any(os.path.basename(p).startswith(("libblas", "libopenblas")) for p in libs), libs
+
+
+def test_profile_shares_classifies_py_spy_stacks(tmp_path):
+    """benchmarks/profile_shares.py: each sample goes to one kind by its innermost Python frame and the
+    native code below it; samples outside solve_contact (the farm's idle thread) are dropped."""
+    import json
+    import subprocess
+    import sys
+    top = "main (vecontact/cli.py:1);solve_contact (vecontact/solver/contact.py:140);"
+    lines = [
+        top + "SlabFFT.apply (vecontact/core/pfft.py:364);_run (vecontact/core/pfft.py:111);"
+              "fftw_execute (libfftw3.so.3) 6",
+        top + "SlabFFT._a2b (vecontact/core/pfft.py:220);PMPI_Alltoallw (libmpi.so.12) 2",
+        top + "SlabFFT._b2a (vecontact/core/pfft.py:223);memcpy (libc.so.6) 1",
+        top + "SlabFFT.apply (vecontact/core/pfft.py:364);multiply (numpy/_core/_multiarray_umath.so) 1",
+        top + "ContactOperator.measures (vecontact/solver/operator.py:137);"
+              "minimum (numpy/_core/_multiarray_umath.so) 3",
+        top + "SlabFFT._allsum (vecontact/core/pfft.py:428);PMPI_Reduce (libmpi.so.12) 1",
+        top + "ncp_solve (vecontact/solver/snes.py:251);VecMAXPY_Seq (libpetsc.so.3.26) 4",
+        top + "ncp_solve (vecontact/solver/snes.py:251) 2",
+        "Hub.loop (vecontact/farm/transport.py:149);clock_nanosleep (libc.so.6) 50",
+    ]
+    prof = tmp_path / "prof.txt"
+    prof.write_text("\n".join(lines) + "\n")
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "profile_shares.py"), str(prof)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    assert out["samples"] == 20
+    want = dict(fftw=6, transposes=3, numpy=3, mpi=1, petsc=4, python=2, other=0)
+    want["pair rest"] = 1
+    for k, n in want.items():
+        assert out[k] == pytest.approx(n / 20, abs=1e-12), k
+    assert out["in_pair"] == pytest.approx(10 / 20, abs=1e-12)
