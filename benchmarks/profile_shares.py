@@ -27,7 +27,8 @@ import json
 import re
 
 KINDS = ("fftw", "transposes", "pair rest", "numpy", "mpi", "petsc", "python", "other")
-_PAIR_FRAMES = ("SlabFFT.apply ", "SlabFFT._backward_from_B ", "SlabFFT._forward_into ", "_run ")
+# the pair's own frames, by name and file (a bare "_run" could be any module's)
+_PAIR_FRAME = re.compile(r"(SlabFFT\.(apply|_forward_into|_backward_from_B)|_run) \(.*core/pfft\.py:")
 
 
 def classify(frames):
@@ -44,7 +45,7 @@ def classify(frames):
         return "transposes"
     if re.search(r"fftw", libs, re.I):
         return "fftw"
-    if native and python is not None and python.startswith(_PAIR_FRAMES):
+    if native and python is not None and _PAIR_FRAME.match(python):
         return "pair rest"
     if re.search(r"multiarray|umath|numpy", libs, re.I):
         return "numpy"
