@@ -172,15 +172,22 @@ def test_git_commit_flags_uncommitted_changes(tmp_path):
         subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path,
                        check=True, capture_output=True)
     git("init", "-q")
-    (tmp_path / "a.py").write_text("x = 1\n")
-    git("add", "a.py")
+    code = tmp_path / "pkg"
+    code.mkdir()
+    (code / "a.py").write_text("x = 1\n")
+    (tmp_path / "results.h5").write_text("rows\n")
+    git("add", "pkg/a.py", "results.h5")
     git("commit", "-qm", "a")
-    clean = git_commit(str(tmp_path))
+    clean = git_commit(str(code))
     assert len(clean) == 40 and all(c in "0123456789abcdef" for c in clean)
-    (tmp_path / "untracked.txt").write_text("not code\n")       # untracked files do not count
-    assert git_commit(str(tmp_path)) == clean
-    (tmp_path / "a.py").write_text("x = 2\n")
+    (code / "untracked.txt").write_text("not code\n")          # untracked files do not count
+    assert git_commit(str(code)) == clean
+    # a tracked file outside the code (a results file committed as a sweep grows) does not count
+    (tmp_path / "results.h5").write_text("more rows\n")
+    assert git_commit(str(code)) == clean
     assert git_commit(str(tmp_path)) == clean + "+dirty"
+    (code / "a.py").write_text("x = 2\n")
+    assert git_commit(str(code)) == clean + "+dirty"
 
 
 def test_unconverged_cases_are_never_drawn():

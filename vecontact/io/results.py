@@ -40,9 +40,12 @@ FORMAT = "vecontact-results/1"
 
 
 def git_commit(where=None):
-    """HEAD of the checkout the package runs from (or of ``where``), with "+dirty" if tracked files
-    differ from it.  Read once per run (ResultsFile.open): HEAD may move while a long sweep runs."""
-    here = where or os.path.dirname(os.path.abspath(__file__))
+    """HEAD of the checkout the package runs from, with "+dirty" if tracked files under the package
+    directory (or under ``where``) differ from it.  Only the code counts: a sweep that writes a tracked
+    results file (``results/paper.h5``, committed as it grows) or a report that rewrites tracked
+    figures leaves its code clean.  Read once per run (ResultsFile.open): HEAD may move while a long
+    sweep runs."""
+    here = where or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
     def git(*args):
         return subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
@@ -50,7 +53,7 @@ def git_commit(where=None):
         out = git("rev-parse", "HEAD")
         if out.returncode != 0:
             return "unknown (not a git checkout)"
-        status = git("status", "--porcelain", "--untracked-files=no")
+        status = git("status", "--porcelain", "--untracked-files=no", "--", ".")
         dirty = status.returncode != 0 or bool(status.stdout.strip())
         return out.stdout.strip() + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
