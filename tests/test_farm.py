@@ -396,6 +396,85 @@ def test_kill_and_resume(tmp_path):
     assert p.returncode == 0 and p.stdout.count("] q1=") == 0 and "0 to solve" in p.stdout
 
 
+def test_signal_during_a_write_waits_for_it():
+    """A signal that interrupts rank 0's own write of the results file ends the job only once the
+    file is written (no half-written temporary, the rows of that write kept)."""
+    from vecontact.farm.interrupt import Interruptible
+    events = []
+
+    class Writer:
+        def commit(self, complete=False):
+            events.append("write starts")
+            handler.handle(signal.SIGINT)          # the signal arrives mid-write
+            events.append("write ends")
+
+    class Hub:
+        def abort(self, text, code=1, head="", unwind=True):
+            events.append(("abort", code, head, coord.writing))
+
+    coord = schedule.Coordinator([], [], writer=Writer())
+    hub = Hub()
+    hub.coord = coord
+    handler = Interruptible(hub)
+    coord.dirty = True
+    assert coord.commit_pending()
+    assert events == ["write starts", "write ends", ("abort", 130, "interrupted by SIGINT", None)]
+    # outside a write the signal acts at once, and once only per signal
+    events.clear()
+    handler.handle(signal.SIGTERM)
+    assert events == [("abort", 143, "interrupted by SIGTERM", None)]
+    assert coord.after_write is None
+
+
+@pytest.mark.parametrize("nranks, signame, whom", [(2, "SIGINT", "group"), (2, "SIGTERM", "launcher"),
+                                                    (0, "SIGINT", "group")])
+def test_interrupt_keeps_the_finished_cases(tmp_path, nranks, signame, whom):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or a scheduler's SIGTERM to
+    mpiexec, mid-sweep: one line, exit status 128 + signal, no traceback nor MPI/PETSc messages, the
+    finished cases committed and no temporary file left; the same command resumes."""
+    kw = dict(q1=(4.0e6,), seeds=(1, 2), pressure={"area_min": 0.02, "area_max": 0.4, "num": 6})
+    job = write_job(tmp_path / "job.yaml", **kw)
+    out = tmp_path / "out.h5"
+    proc = subprocess.Popen(command(nranks, ["run", job, "--quiet"]), cwd=tmp_path, env=env_for(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    n, t0 = 0, time.time()
+    try:
+        while time.time() - t0 < 60 and proc.poll() is None:
+            try:
+                n = len(cases_of(out)) if out.exists() else 0
+            except (OSError, KeyError):
+                n = 0
+            if n >= 2:
+                break
+            time.sleep(0.005)
+        sig = getattr(signal, signame)
+        if whom == "group":
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert n >= 2, "the run finished or failed before it could be interrupted:\n" + stdout + stderr
+    text = stdout + stderr
+    assert proc.returncode == 128 + sig, (proc.returncode, text)
+    kept = cases_of(out)
+    assert 2 <= len(kept) < 24 and (kept["status"] == 1).all()
+    line = (f"vecontact: interrupted by {signame}; {len(kept)} finished cases are kept in the results "
+            "file: rerun the same command to resume")
+    assert stderr.count(line) == 1, stderr
+    for noise in ("Traceback", "PETSC ERROR", "Assertion", "Message truncated", "KeyboardInterrupt"):
+        assert noise not in text, text
+    assert sorted(os.listdir(tmp_path)) == ["job.yaml", "out.h5"]
+    p = vecontact(nranks, ["run", job], cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert f"{len(kept)} already finished, {24 - len(kept)} to solve" in p.stdout
+    assert len(cases_of(out)) == 24
+
+
 def _refused(p):
     assert p.returncode == 2, p.stdout + p.stderr
     lines = p.stderr.strip().splitlines()

@@ -11,6 +11,7 @@ Layers, one module each:
 * :mod:`~vecontact.farm.transport`: the hub on rank 0, the ranks' links to it, polling waits, abort;
 * :mod:`~vecontact.farm.worker`: a group's loop and its caches (FFT, surface);
 * :mod:`~vecontact.farm.case`: one case solved and turned into its row (and fields file);
+* :mod:`~vecontact.farm.interrupt`: Ctrl-C and SIGTERM (rank 0 commits and ends the job);
 * :mod:`~vecontact.farm.progress`: the start line, progress lines with ETA, the summary;
 * :mod:`~vecontact.farm.run`: :func:`run_numerics`, which puts them together.
 """

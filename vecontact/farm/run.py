@@ -12,6 +12,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.farm import progress
+from vecontact.farm.interrupt import Interruptible
 from vecontact.farm.schedule import Coordinator, build_chains, ranks_for_grid
 from vecontact.farm.transport import Hub, Link, abort, wait
 from vecontact.farm.worker import Worker
@@ -88,30 +89,29 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
             print(progress.start_line(len(cases), ndone, int(todo.sum()), len(chains), size,
                                       num.ranks_per_case, rule, threaded), flush=True)
     worker = Worker(job, comm, Link(comm, ctl, hub), cases, rows, psds, Ns, chains, options)
-    try:
-        if threaded:
-            if rank == 0 and size > 1:
-                hub.start()
-            worker.run(comm.Dup())
-            if rank == 0 and hub.thread is not None:
-                while hub.thread.is_alive():
-                    hub.thread.join(0.05)
-        else:
-            group = comm.Split(0 if rank > 0 else MPI.UNDEFINED, key=rank)
-            if rank == 0:
-                hub.loop()
-            else:
-                worker.run(group)
-    except BaseException:
-        worker.fail(traceback.format_exc())
-    # all groups stopped: the last rows, the summary
-    if rank == 0:
+    with Interruptible(hub):     # Ctrl-C, SIGTERM: rank 0 commits and ends the job
         try:
-            coord.commit_pending()
-            if writer is not None:
-                writer.commit(complete=len(writer.done()) >= len(cases))
+            if threaded:
+                if rank == 0 and size > 1:
+                    hub.start()
+                worker.run(comm.Dup())
+                if rank == 0 and hub.thread is not None:
+                    while hub.thread.is_alive():
+                        hub.thread.join(0.05)
+            else:
+                group = comm.Split(0 if rank > 0 else MPI.UNDEFINED, key=rank)
+                if rank == 0:
+                    hub.loop()
+                else:
+                    worker.run(group)
         except BaseException:
-            abort(comm, "vecontact: error: writing the results file failed:\n" + traceback.format_exc())
+            worker.fail(traceback.format_exc())
+        # all groups stopped: the last rows, the summary
+        if rank == 0:
+            try:
+                coord.commit_pending(complete=writer is not None and len(writer.done()) >= len(cases))
+            except BaseException:
+                abort(comm, "vecontact: error: writing the results file failed:\n" + traceback.format_exc())
     wall = time.perf_counter() - t_start
     busy = fin.gather(worker.busy, root=0)
     if rank == 0 and not quiet:

@@ -156,6 +156,8 @@ class Coordinator:
         self.running = {}           # leader -> [cid, current position, stop]
         self.active = 1             # groups alive: the farm starts with one
         self.lock = threading.RLock()
+        self.writing = None         # ident of the thread writing the results file, if any
+        self.after_write = None     # called once that write is done (a signal deferred by it)
         self.dirty = False
         self.commits = 0
         self.commit_seconds = 0.0
@@ -237,15 +239,23 @@ class Coordinator:
         if self.progress is not None:
             self.progress.record(idx, fin.row, (fin.diagnostics or {}).get(REASON, ""), self.ndone)
 
-    def commit_pending(self):
-        """Commit the results file if rows arrived since the last commit. Returns True if it did."""
+    def commit_pending(self, complete=None):
+        """Commit the results file if rows arrived since the last commit; with ``complete`` (True or
+        False) commit in any case, marking the file complete or not. Returns True if it did."""
         with self.lock:
-            if not self.dirty:
+            if not self.dirty and complete is None:
                 return False
             if self.writer is not None:
                 t = time.perf_counter()
-                self.writer.commit()
+                self.writing = threading.get_ident()
+                try:
+                    self.writer.commit(complete=bool(complete))
+                finally:
+                    self.writing = None
                 self.commit_seconds += time.perf_counter() - t
                 self.commits += 1
             self.dirty = False
-            return True
+        if self.after_write is not None:
+            then, self.after_write = self.after_write, None
+            then()
+        return True

@@ -21,6 +21,7 @@ prints the case and the traceback once and calls ``MPI_Abort``: the job ends pro
 left waiting in a collective). A failing rank that the hub does not abort within ``FAIL_GRACE``
 aborts by itself.
 """
+import os
 import sys
 import threading
 import time
@@ -67,8 +68,10 @@ def unpack(buf):
     return kind(*(int(x) for x in buf[1:1 + len(kind._fields)]))
 
 
-def abort(comm, text):
-    """Print ``text`` to stderr and end the job: SystemExit(1) on one rank, else MPI_Abort."""
+def abort(comm, text, code=1, unwind=True):
+    """Print ``text`` to stderr and end the job with exit status ``code``: MPI_Abort on several
+    ranks; on one, SystemExit (``unwind``) or ``os._exit`` (from a signal handler, which may run inside
+    a PETSc callback: PETSc would report the SystemExit as an error of its own)."""
     try:
         sys.stdout.flush()
     except Exception:
@@ -76,11 +79,13 @@ def abort(comm, text):
     sys.stderr.write(text)
     sys.stderr.flush()
     if comm.size == 1:
-        raise SystemExit(1)
+        if unwind:
+            raise SystemExit(code)
+        os._exit(code)
     # mpiexec (hydra) tears the job down as soon as it hears of the abort and can drop output still
     # in flight from the ranks: give it a moment to forward the message first
     time.sleep(ABORT_DELAY)
-    comm.Abort(1)
+    comm.Abort(code)
 
 
 class Hub:
@@ -151,25 +156,31 @@ class Hub:
             self.abort("vecontact: error: the coordinator / results writer on rank 0 failed:\n"
                        + traceback.format_exc())
 
-    def abort(self, text):
-        """Commit what is finished, print ``text`` once, end the whole job."""
+    def abort(self, text, code=1, head="job aborted", unwind=True):
+        """Commit what is finished, print ``text`` and one line (``head``; what the file keeps)
+        once, end the whole job with exit status ``code`` (see :func:`abort`)."""
         with self._abort_lock:
             if self.aborting:
                 while True:
                     time.sleep(1)
             self.aborting = True
-        kept = ""
+        kept = f"vecontact: {head}; "
+        locked = False
         try:
-            if self.coord.lock.acquire(timeout=30):
-                try:
-                    self.coord.commit_pending()
-                    kept = (f"vecontact: job aborted; {self.coord.ndone} finished cases are kept in the results "
-                            "file: rerun the same command to resume\n")
-                finally:
-                    self.coord.lock.release()
+            locked = self.coord.lock.acquire(timeout=30)
+            if locked:      # held until the end: no row arrives after the count below
+                self.coord.commit_pending()
+                kept += (f"{self.coord.ndone} finished cases are kept in the results file: rerun the "
+                         "same command to resume\n")
+            else:
+                kept += "the results file keeps the cases committed before (its writer did not answer)\n"
         except BaseException:
-            kept = "vecontact: job aborted; committing the finished cases failed too\n"
-        abort(self.comm, text.rstrip("\n") + "\n" + kept)
+            kept += "committing the finished cases failed too\n"
+        try:
+            abort(self.comm, (text.rstrip("\n") + "\n" if text else "") + kept, code, unwind)
+        finally:            # reached only when one rank unwinds (SystemExit)
+            if locked:
+                self.coord.lock.release()
 
 
 class Link:
