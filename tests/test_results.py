@@ -204,3 +204,19 @@ def test_unconverged_cases_are_never_drawn():
     assert got["area"].tolist() == [0.25, 0.125] and (got["status"] == 1).all()
     assert got["pressure"].tolist() == [1e5, 4e5]
     assert len(drawn_cases(cases[:0])) == 0
+
+
+def test_stale_temporaries_removed_live_ones_kept(tmp_path):
+    """A writer killed mid-write leaves <output>.tmp-<pid>: the next open removes it, unless a live
+    process has that pid."""
+    import subprocess
+    import sys
+    from vecontact.io.results import remove_stale_temporaries
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    out = tmp_path / "out.h5"
+    for name in (f"out.h5.tmp-{dead}", f"out.h5.tmp-{os.getppid()}", "out.h5.tmp-x", "other.h5.tmp-1"):
+        (tmp_path / name).write_bytes(b"partial")
+    remove_stale_temporaries(str(out))
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [f"out.h5.tmp-{os.getppid()}", "out.h5.tmp-x", "other.h5.tmp-1"])

@@ -22,6 +22,7 @@ Crash safety: every commit writes the whole (small) main file to ``<output>.tmp-
 fsyncs it and renames it over the old one (atomic on POSIX), then fsyncs the folder. A kill
 at any moment leaves either the previous or the new complete file.
 """
+import glob
 import json
 import os
 import platform
@@ -111,6 +112,26 @@ def atomic_h5(path, fill):
             os.remove(tmp)
 
 
+def remove_stale_temporaries(path):
+    """Remove ``<path>.tmp-<pid>`` files left by a writer killed mid-write (kill -9, a batch
+    system's SIGKILL) whose process is gone from this host; the file itself never depends on them."""
+    for tmp in glob.glob(glob.escape(path) + ".tmp-*"):
+        pid = tmp.rsplit("-", 1)[1]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue                # a live process of that pid: leave it alone
+        except ProcessLookupError:
+            pass
+        except OSError:
+            continue
+        try:
+            os.remove(tmp)
+        except OSError:
+            pass
+
+
 def write_fields_file(path, case_name, arrays, attrs):
     """Write one case's fields next to the results file ``path``, atomically, from any rank.
 
@@ -166,6 +187,7 @@ class ResultsFile:
                 os.makedirs(folder, exist_ok=True)
             except OSError as exc:
                 raise ResultsFileError("output", f"cannot create the folder {folder} ({exc.strerror})") from None
+        remove_stale_temporaries(path)
         return self
 
     def _load_existing(self):
