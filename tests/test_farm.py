@@ -409,7 +409,10 @@ def test_signal_during_a_write_waits_for_it():
             events.append("write ends")
 
     class Hub:
+        aborting = False
+
         def abort(self, text, code=1, head="", unwind=True):
+            self.aborting = True
             events.append(("abort", code, head, coord.writing))
 
     coord = schedule.Coordinator([], [], writer=Writer())
@@ -425,6 +428,8 @@ def test_signal_during_a_write_waits_for_it():
     handler.handle(signal.SIGINT)
     assert events == []
     # outside a write the signal acts at once
+    hub = Hub()
+    hub.coord = coord
     handler = Interruptible(hub)
     handler.handle(signal.SIGTERM)
     assert events == [("abort", 143, "interrupted by SIGTERM", None)]

@@ -21,7 +21,6 @@ class Interruptible:
     def __init__(self, hub):
         self.hub = hub
         self.saved = {}
-        self.ending = False     # a second signal (mpiexec forwards the terminal's) changes nothing
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():   # only there can Python set them
@@ -36,12 +35,11 @@ class Interruptible:
         return False
 
     def handle(self, signum, frame=None):
-        if self.ending:
+        if self.hub.aborting:       # a second signal (mpiexec forwards the terminal's): nothing new
             return
         coord = self.hub.coord
         if coord.writing == threading.get_ident():       # interrupted our own write: finish it first
             coord.after_write = lambda: self.handle(signum)
             return
-        self.ending = True
         self.hub.abort("", code=128 + signum, head=f"interrupted by {signal.Signals(signum).name}",
                        unwind=False)

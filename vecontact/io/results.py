@@ -20,8 +20,10 @@ Layout (see docs/results-format.md):
 
 Crash safety: every commit writes the whole (small) main file to ``<output>.tmp-<pid>``,
 fsyncs it and renames it over the old one (atomic on POSIX), then fsyncs the folder. A kill
-at any moment leaves either the previous or the new complete file.
+at any moment leaves either the previous or the new complete file (and perhaps the temporary, which
+the next writer removes).
 """
+import contextlib
 import glob
 import json
 import os
@@ -38,6 +40,7 @@ from vecontact.errors import InputError, ResultsFileError
 from vecontact.rows import CASE_DTYPE, COLUMNS, STATUS_CODES, case_key, empty_row
 
 FORMAT = "vecontact-results/1"
+TMP_INFIX = ".tmp-"      # a commit writes <output>.tmp-<pid>, then renames it over <output>
 
 
 def git_commit(where=None):
@@ -98,7 +101,7 @@ def _fsync_dir(path):
 
 def atomic_h5(path, fill):
     """Write an HDF5 file atomically: ``fill(h5file)`` into a temporary, fsync, rename."""
-    tmp = f"{path}.tmp-{os.getpid()}"
+    tmp = f"{path}{TMP_INFIX}{os.getpid()}"
     try:
         with h5py.File(tmp, "w") as f:
             fill(f)
@@ -115,19 +118,15 @@ def atomic_h5(path, fill):
 def remove_stale_temporaries(path):
     """Remove ``<path>.tmp-<pid>`` files left by a writer killed mid-write (kill -9, a batch
     system's SIGKILL) whose process is gone from this host; the file itself never depends on them."""
-    for tmp in glob.glob(glob.escape(path) + ".tmp-*"):
-        pid = tmp.rsplit("-", 1)[1]
+    for tmp in glob.glob(glob.escape(path) + TMP_INFIX + "*"):
+        pid = tmp.rsplit(TMP_INFIX, 1)[1]
         if not pid.isdigit() or int(pid) == os.getpid():
             continue
         try:
-            os.kill(int(pid), 0)
-            continue                # a live process of that pid: leave it alone
+            os.kill(int(pid), 0)    # no error: a live process of that pid, leave its file alone
         except ProcessLookupError:
-            pass
-        except OSError:
-            continue
-        try:
-            os.remove(tmp)
+            with contextlib.suppress(OSError):
+                os.remove(tmp)
         except OSError:
             pass
 
