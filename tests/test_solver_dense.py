@@ -126,7 +126,7 @@ def test_warm_start_from_other_load():
 @pytest.mark.parametrize("step", ["contact", "free"])
 @pytest.mark.parametrize("v,sigma0", [(1.0, 2e4), (30.0, 5e4)])
 def test_newton_step_modes_vs_dense(step, v, sigma0):
-    """Both ways of solving the Newton step (on the contact set / on the whole grid, chosen by area in
+    """Both ways of solving the Newton step (on the contact set / on the free set, chosen by area in
     ``auto``) forced for a whole solve: the same exact solution."""
     N, name = 32, "hn"
     h = surface(N)

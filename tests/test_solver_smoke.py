@@ -155,7 +155,7 @@ def test_krylov_kernel_options_global_and_overridable():
 
 def test_auto_step_mode_follows_contact_area():
     """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area(N) (0.3 up to
-    2048^2, 0.15 above), grid steps above; both give the same solution."""
+    2048^2, 0.15 above), free-set steps above; both give the same solution."""
     from vecontact.solver.settings import SolverSettings
     CONTACT_STEP_AREA = SolverSettings().step_area(64)
     N, L = 64, 1e-4
@@ -175,3 +175,22 @@ def test_auto_step_mode_follows_contact_area():
     forced, modes_forced = run(1e4, vc_contact_step_area=1.0)
     assert modes_forced == {"contact"}
     assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu
+
+
+def test_ksp_options_reach_the_free_set_steps():
+    """-ksp_* options reach the inner GMRES of the free-set steps (it has the solver's own prefix):
+    -ksp_max_it 3 caps every step at 3 inner iterations, where the steps take more without it."""
+    N, L = 64, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+
+    def run(**opts):
+        r = solve_contact(fft, L, h, mod, 1.0, 1e4, store=(), coarse=False, max_iterations=6,
+                          petsc_options=dict(vc_contact_step="free", **opts))
+        return r.linear_iterations, r.iterations
+
+    free_lin, free_it = run()
+    capped_lin, capped_it = run(ksp_max_it=3)
+    assert free_lin > 3 * free_it, (free_lin, free_it)
+    assert 0 < capped_lin <= 3 * capped_it, (capped_lin, capped_it)

@@ -105,7 +105,7 @@ def test_solver_state_is_freed_collective(comm):
     N^2 arrays) alive; a 4096^2 sweep grew by 0.9 GB per case and rank before this was cleaned up."""
     import gc
     from vecontact.solver.contactset import ContactSetStep
-    from vecontact.solver.gridstep import GridStep
+    from vecontact.solver.freeset import FreeSetStep
     from vecontact.solver.newton import NewtonState
     from vecontact.solver.snes import _Semismooth
     N = 48
@@ -115,6 +115,6 @@ def test_solver_state_is_freed_collective(comm):
                             petsc_options={"vc_contact_step": step})
         assert res.converged
         gc.collect()
-        kinds = (ContactSetStep, GridStep, NewtonState, _Semismooth)
+        kinds = (ContactSetStep, FreeSetStep, NewtonState, _Semismooth)
         alive = [type(o).__name__ for o in gc.get_objects() if isinstance(o, kinds)]
         assert alive == [], (step, alive)

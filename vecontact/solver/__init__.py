@@ -11,7 +11,8 @@ elastic only, the baseline).  Module map:
 * snes.py        the PETSc SNES set-up and callbacks of the semismooth Newton method
 * newton.py      NewtonState: the iterate, its pressure and its active set
 * policy.py      StepPolicy: where and how tightly each Newton step is solved (pure rules)
-* contactset.py, gridstep.py   the two Newton-step solvers (on the contact set, on the whole grid)
+* contactset.py, freeset.py   the two Newton-step solvers (on the contact set, on the free set);
+  subset.py: what they share
 * vi.py          -snes_type vinewtonrsls (PETSc's reduced-space VI Newton), the alternative
 * pk.py          Polonsky-Keer; operator.py: the nondimensional operator; warmstart.py: grid transfers
 * settings.py    SolverSettings, every tuning constant; options.py: the one PETSc-options parser

@@ -34,39 +34,12 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
+from vecontact.solver.subset import Restricted, SubsetStep
 
 __all__ = ["ContactSetStep", "oracle_solve"]
 
 
-class _Restricted:
-    """y = P (multiplier P x)_C for a Fourier multiplier ``multiplier`` (Python Mat and Python PC of the
-    inner KSP)."""
-
-    def __init__(self, step, multiplier):
-        self.step = step
-        self.multiplier = multiplier
-
-    def _apply(self, x, y):
-        s = self.step
-        xa = x.getArray(readonly=True)
-        buf = s.buf
-        buf.flat[s.idx] = xa
-        s.fft.apply(buf, self.multiplier, s.out)
-        ya = y.getArray()
-        np.take(s.out.ravel(), s.idx, out=ya)
-        ya -= s.mean_C(ya)
-
-    def mult(self, mat, x, y):
-        self._apply(x, y)
-
-    def apply(self, pc, x, y):
-        self._apply(x, y)
-
-    def setUp(self, pc):
-        pass
-
-
-class ContactSetStep:
+class ContactSetStep(SubsetStep):
     """Python PC of the outer (Newton) KSP: y = J^{-1} x exactly, up to the inner KSP's tolerance.
 
     ``activate(ksp)`` makes the next Newton steps contact-set steps (the outer KSP becomes ``preonly``);
@@ -76,84 +49,36 @@ class ContactSetStep:
     """
 
     def __init__(self, op, kappa, PETSc, prefix, settings):
-        self.op = op
-        self.fft = fft = op.fft
-        self.comm = fft.comm
-        self.kappa = float(kappa)
-        self.PETSc = PETSc
-        self.settings = settings
-        self.shape = fft.local_real_shape
-        self.buf = fft.real_array()     # zero outside C (maintained by set_active)
-        self.out = fft.real_array()
-        self.w = fft.real_array()
-        self.freef = fft.real_array()   # 1.0 on F, 0.0 on C
-        self.idx = np.zeros(0, dtype=np.intp)
-        self.n_C = 0
-        self.iterations = 0
-        self.solves = 0
-        self._A = self._b = self._y = None
-        self.ksp = PETSc.KSP().create(comm=self.comm)
-        self._prefix = prefix + "contact_"
-        self.ksp.setOptionsPrefix(self._prefix)
-        self._configured = False
-        self._own_keys = []
+        super().__init__(op, kappa, PETSc, prefix + "contact_", settings)
+        self.freef = self.fft.real_array()   # 1.0 on F, 0.0 on C
 
-    def activate(self, ksp):
-        """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
-        ksp.setType("preonly")
-        ksp.getPC().setPythonContext(self)
+    # ------------------------------------------------------------------ SubsetStep hooks
+    def defaults(self, n_loc):
+        restart = self.comm.allreduce(self.settings.inner_restart(n_loc), op=MPI.MIN)
+        return dict(PETSC_INNER_DEFAULTS, ksp_gmres_restart=str(restart))
+
+    def operator(self):
+        return Restricted(self, self.op.c, self._remove_mean)
+
+    def preconditioner(self):
+        return Restricted(self, self.op.m, self._remove_mean)
+
+    def _remove_mean(self, y, full):
+        y -= self.mean_C(y)
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
         """Mean over the (global) contact set of the C-vector ``a``."""
-        return self.fft.sum(a) / self.n_C
+        return self.fft.sum(a) / self.n_S
 
     def set_active(self, act, n_active):
         """New contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""
-        PETSc = self.PETSc
-        self.buf.flat[self.idx] = 0.0
-        idx = np.flatnonzero(act.ravel())
-        n_loc = int(idx.size)
-        n_C = int(n_active)
-        if n_C == 0:
+        if int(n_active) == 0:
             raise ValueError("empty contact set")
         np.logical_not(act, out=self.freef, casting="unsafe")
-        self.idx = idx
-        resize = self._A is None or self._A.getLocalSize()[0] != n_loc
-        if self.comm.size > 1:   # collective: every rank must take the same branch
-            resize = self.comm.allreduce(resize, op=MPI.LOR)
-        if resize:
-            if self._A is not None:
-                self.ksp.reset()          # a KSP cannot change its operator's size otherwise
-                for obj in (self._A, self._b, self._y):
-                    obj.destroy()
-            self._A = PETSc.Mat().createPython(((n_loc, n_C), (n_loc, n_C)),
-                                               context=_Restricted(self, self.op.c), comm=self.comm)
-            self._A.setUp()
-            self._b = self._A.createVecLeft()
-            self._y = self._A.createVecRight()
-        self.n_C = n_C
-        self.ksp.setOperators(self._A)
-        if not self._configured:
-            restart = self.comm.allreduce(self.settings.inner_restart(n_loc), op=MPI.MIN)
-            opts = PETSc.Options()
-            for k, v in dict(PETSC_INNER_DEFAULTS, ksp_gmres_restart=str(restart)).items():
-                if not opts.hasName(self._prefix + k):
-                    opts[self._prefix + k] = v
-                    self._own_keys.append(self._prefix + k)
-            pc = self.ksp.getPC()
-            pc.setType("python")
-            pc.setPythonContext(_Restricted(self, self.op.m))
-            self.ksp.setFromOptions()
-            self._configured = True
-
-    def set_tolerances(self, rtol, atol, max_it):
-        self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=max_it)
+        self.select(np.flatnonzero(act.ravel()), n_active)
 
     # ------------------------------------------------------------------ PC interface
-    def setUp(self, pc):
-        pass
-
     def apply(self, pc, x, y):
         fft = self.fft
         idx = self.idx
@@ -162,35 +87,20 @@ class ContactSetStep:
         w = self.w
         np.multiply(r, self.freef, out=w)
         w *= self.kappa                                   # s_F = kappa r_F, 0 on C
-        s0 = -self.fft.sum(w) / self.n_C
+        s0 = -self.fft.sum(w) / self.n_S
         w.flat[idx] = s0                                  # s~
         fft.apply(w, self.op.c, self.out)                 # c s~
         b = self._b.getArray()
         np.take(r.ravel(), idx, out=b)
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
-        self._y.set(0.0)
-        self.ksp.solve(self._b, self._y)
-        self.iterations += self.ksp.getIterationNumber()
-        self.solves += 1
+        self.solve()
         w.flat[idx] += self._y.getArray(readonly=True)    # s
         fft.apply(w, self.op.c, xo)                       # c s
         # rigid shift; x = c s + e on C too, so that m x = s exactly: the inner residual stays a
         # small gap error on C instead of turning into pressures (m rho) on F that upset the set
         e = self.mean_C(np.take(r.ravel(), idx) - np.take(xo.ravel(), idx))
         xo += e
-
-    def release(self):
-        for obj in (self._A, self._b, self._y, self.ksp):
-            if obj is not None:
-                obj.destroy()
-        opts = self.PETSc.Options()
-        for k in self._own_keys:
-            try:
-                opts.delValue(k)
-            except Exception:
-                pass
-        self._own_keys = []
 
 
 def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):

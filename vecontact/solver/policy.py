@@ -1,7 +1,7 @@
 """Step policy of the inexact semismooth Newton method: pure rules (no PETSc, no MPI, no arrays).
 
 Before every Newton step the solver (snes.py) asks where to solve the step's linear system
-(``choose_step``: on the contact set or on the whole grid) and how tightly (``StepPolicy.step``), given
+(``choose_step``: on the contact set or on the free set) and how tightly (``StepPolicy.step``), given
 the active-set changes and the convergence measures of the iterates so far.  The constants are
 SolverSettings fields (settings.py); what they were measured on is in benchmarks/RESULTS.md.
 
@@ -37,7 +37,7 @@ def tighten_steps(changes, residuals, wander_ratio):
 
 
 def choose_step(requested, n_active, n_points, area):
-    """"contact" (solve the step on the contact set) or "free" (on the whole grid).
+    """"contact" (solve the step on the contact set) or "free" (on the free set).
 
     ``requested``: the contact_step setting (auto, contact, free); auto takes contact-set steps while
     the active set has at most ``area`` x ``n_points`` of the grid's points."""
@@ -49,7 +49,7 @@ def choose_step(requested, n_active, n_points, area):
 class StepPolicy:
     """Krylov tolerances of the Newton steps of one SNES solve (see the module docstring).
 
-    ``atol``: the absolute tolerance of an exact grid step (tol / kappa, h_rms units); ``own``: False
+    ``atol``: the absolute tolerance of an exact free-set step (tol / kappa, h_rms units); ``own``: False
     when the user's PETSc options (-ksp_rtol, -snes_ksp_ew, ...) decide the tolerances instead.
     ``changes`` and ``residuals`` keep the history the rules read (and the solver reports).
     """

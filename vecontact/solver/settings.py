@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 
 __all__ = ["SolverSettings", "PREFIX", "PETSC_DEFAULTS", "PETSC_VI_DEFAULTS", "PETSC_INNER_DEFAULTS",
-           "PETSC_GLOBAL_DEFAULTS", "gmres_restart"]
+           "PETSC_FREE_DEFAULTS", "PETSC_GLOBAL_DEFAULTS", "gmres_restart"]
 
 PREFIX = "vc_"
 
@@ -36,7 +36,7 @@ def _knob(default, doc, lo=None, hi=None, lo_open=False, choices=None):
 @dataclass(frozen=True)
 class SolverSettings:
     """Tuning constants of solve_contact (contact.py), the semismooth Newton solve (snes.py, policy.py,
-    contactset.py, gridstep.py), the warm starts (warmstart.py), Polonsky-Keer (pk.py) and operator.py."""
+    contactset.py, freeset.py), the warm starts (warmstart.py), Polonsky-Keer (pk.py) and operator.py."""
 
     # --- Newton iterations and the Krylov tolerances of their steps (policy.py)
     newton_max_it: int = _knob(100, "Newton iterations on the finest grid (numerics.max_iterations wins)", lo=1)
@@ -58,8 +58,8 @@ class SolverSettings:
                                      lo=0, hi=1, lo_open=True)
     inner_atol_factor: float = _knob(5.0, "contact-set steps: atol x this (a gap error on C) [RESULTS.md]",
                                      lo=0, lo_open=True)
-    # --- where a Newton step is solved: on the contact set or on the whole grid
-    contact_step: str = _knob("auto", "auto (by contact_step_area), contact or free (the whole grid)",
+    # --- where a Newton step is solved: on the contact set or on the free set
+    contact_step: str = _knob("auto", "auto (by contact_step_area), contact or free (free-set steps)",
                               choices=("auto", "contact", "free"))
     contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 (N <= ..._large_n) [RESULTS.md]",
                                      lo=0, hi=1)
@@ -67,9 +67,9 @@ class SolverSettings:
                                            lo=0, hi=1)
     contact_step_large_n: int = _knob(2048, "grid size above which contact_step_area_large applies", lo=0)
     # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
-    restart_max: int = _knob(120, "GMRES restart of the grid steps (-ksp_gmres_restart wins) [RESULTS.md]",
+    restart_max: int = _knob(120, "GMRES restart of the free-set steps (-ksp_gmres_restart wins) [RESULTS.md]",
                              lo=1)
-    restart_memory: float = _knob(3e9, "bytes per rank for the grid steps' Krylov basis [RESULTS.md]",
+    restart_memory: float = _knob(3e9, "bytes per rank for the free-set steps' Krylov basis [RESULTS.md]",
                                   lo=0, lo_open=True)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(1.5e9, "bytes per rank for the inner FGMRES basis", lo=0, lo_open=True)
@@ -104,7 +104,8 @@ class SolverSettings:
         return self.contact_step_area if N <= self.contact_step_large_n else self.contact_step_area_large
 
     def restart(self, n_local, vectors=1):
-        """GMRES restart of the grid steps (GMRES: 1 basis vector an iteration, FGMRES: 2)."""
+        """GMRES restart of the free-set steps (n_local: local free points; GMRES: 1 basis vector an
+        iteration, FGMRES and the VI method's whole-grid FGMRES: 2)."""
         return gmres_restart(n_local, self.restart_memory, vectors, self.restart_max, self.restart_min)
 
     def inner_restart(self, n_local):
@@ -166,8 +167,7 @@ def _check(f, value):
 # ---------------------------------------------------------------------------------------------------
 # Values vecontact gives PETSc's own options unless the user gives them ([RESULTS.md]: measured there).
 
-# SNES of the semismooth Newton method (solver prefix); ksp_gmres_restart from restart_max; the grid
-# steps' KSP: GMRES, right preconditioning (gridstep.py) [RESULTS.md]
+# SNES of the semismooth Newton method (solver prefix) [RESULTS.md]
 PETSC_DEFAULTS = {
     "snes_type": "newtonls",
     "snes_linesearch_type": "basic",          # full Newton steps (primal-dual active set)
@@ -182,5 +182,9 @@ PETSC_VI_DEFAULTS = {
 }
 # inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart()
 PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres"}
+# inner KSP of the free-set steps (the solver prefix itself, freeset.py): the PC is a fixed linear map,
+# so right-preconditioned GMRES does what FGMRES does with half the basis; ksp_gmres_restart from
+# restart() of the free set's size [RESULTS.md]
+PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right"}
 # global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}

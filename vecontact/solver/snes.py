@@ -14,8 +14,9 @@ the contact set (SolverSettings.contact_step / contact_step_area), and how tight
 * on the contact set (contactset.py): KSP ``preonly`` with a Python PC that eliminates the free set
   exactly and runs an inner FGMRES (options prefix ``contact_``) on the restricted compliance;
   cheap orthogonalisation (vectors of A/A0 N^2 entries), 2 FFT pairs per inner iteration;
-* on the whole grid (gridstep.py): KSP GMRES, right preconditioning, the compliance on F as the PC;
-  2 FFT pairs per iteration.
+* on the free set (freeset.py): KSP ``preonly`` with a Python PC that sets x_C = r_C and runs an
+  inner GMRES (the SNES's own prefix: ``-ksp_*``) on the stiffness of the free set, preconditioned by
+  its compliance; vectors of (1 - A/A0) N^2 entries, 2 FFT pairs per inner iteration.
 The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py);
 ``-snes_ksp_ew`` or any ``-ksp_``/``-contact_ksp_`` rtol, atol or max_it in the options hand them to
 PETSc instead.  Convergence is decided by our own scale-free test (operator.py), installed with
@@ -31,7 +32,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.contactset import ContactSetStep
-from vecontact.solver.gridstep import GridStep
+from vecontact.solver.freeset import FreeSetStep
 from vecontact.solver.newton import NewtonState
 from vecontact.solver.policy import StepPolicy, choose_step
 from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PETSC_VI_DEFAULTS
@@ -82,7 +83,7 @@ class _Semismooth:
     def __init__(self, state, policy, steps, settings):
         self.state = state
         self.policy = policy
-        self.steps = steps                       # {"contact": ContactSetStep, "free": GridStep}
+        self.steps = steps                       # {"contact": ContactSetStep, "free": FreeSetStep}
         self.settings = settings
         self.m_k = state.op.m / state.kappa      # Jacobian multiplier on the free rows
         self.mode = None                         # where the current step is solved
@@ -123,10 +124,8 @@ class _Semismooth:
         np.copyto(ya, xa, where=st.act)      # identity rows on the contact set
 
     def linear_iterations(self, snes):
-        """Krylov iterations so far: outer GMRES (grid steps) + inner (contact-set steps; the outer
-        preonly KSP counts each of those solves as one iteration)."""
-        cs = self.steps["contact"]
-        return snes.getLinearSolveIterations() - cs.solves + cs.iterations
+        """Inner Krylov iterations so far (the outer preonly KSP counts each inner solve as one)."""
+        return snes.getLinearSolveIterations() + sum(s.iterations - s.solves for s in self.steps.values())
 
     def diagnostics(self, linear_iterations):
         """Active-set changes, linear iterations before each step (and at the end), step-mode switches."""
@@ -208,11 +207,10 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     nloc = int(np.prod(fft.local_real_shape))
     ntot = fft.N * fft.N
     vi = options.get("snes_type", PETSC_DEFAULTS["snes_type"]).startswith("vi")
-    grid_ksp_type = options.get("ksp_type", PETSC_VI_DEFAULTS["ksp_type"] if vi else "gmres")
-    restart = comm.allreduce(settings.restart(nloc, vectors=2 if grid_ksp_type == "fgmres" else 1), op=MPI.MIN)
-    defaults = dict(PETSC_DEFAULTS, ksp_gmres_restart=str(restart))
-    if vi:
-        defaults.update(PETSC_VI_DEFAULTS, ksp_max_it=str(settings.ksp_max_it))
+    defaults = dict(PETSC_DEFAULTS)
+    if vi:   # the VI method's KSP works on whole-grid vectors (FGMRES: 2 a Krylov iteration)
+        restart = comm.allreduce(settings.restart(nloc, vectors=2), op=MPI.MIN)
+        defaults.update(PETSC_VI_DEFAULTS, ksp_max_it=str(settings.ksp_max_it), ksp_gmres_restart=str(restart))
     hold_comm(comm)
     _COUNTER[0] += 1
     prefix = f"vecontact{_COUNTER[0]}_"
@@ -224,9 +222,7 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF))
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings),
-                     free=GridStep(op, state.kappa, PETSc, grid_ksp_type,
-                                   int(options.get("ksp_gmres_restart", restart)),
-                                   pc_side_right=grid_ksp_type == "gmres" and "ksp_pc_side" not in options))
+                     free=FreeSetStep(op, state.kappa, PETSc, prefix, settings))
         form = _Semismooth(state, policy, steps, settings)
     conv = _Convergence(state, policy, tol, monitor)
     _apply_global_options(PETSc, options)

@@ -1,0 +1,88 @@
+"""The semismooth Newton step solved on the free set (for large contact sets).
+
+Newton system of the gap formulation (snes.py), contact set C, free set F (nondimensional):
+
+    J x = P_C x + P_F m x / kappa = r.
+
+Its rows on C give x_C = r_C; the rows on F then leave a system for x_F alone,
+
+    A x_F = b,    A = (m P_F . )_F / kappa,    b = r_F - (m P_C r_C)_F / kappa,
+
+the stiffness of the free set (not symmetric for a viscoelastic modulus).  The inner KSP (default
+GMRES, right preconditioning: its residual is the free-set residual of J x = r, in h_rms) solves it
+with the fixed linear PC
+
+    B z = kappa ((c P_F z)_F - <c P_F z>_C),
+
+the compliance on F with a rigid shift (the correction does not move the contact set on average).
+Cost per Newton step: 1 FFT pair + 2 per inner Krylov iteration (A and B).  The Krylov vectors have
+|F| entries, and the C rows are solved exactly instead of being part of the Krylov problem: against
+the same GMRES on whole-grid vectors (the method up to session 11, deleted) it takes fewer
+iterations and less time at high speed (benchmarks/RESULTS.md, "Free-set steps replace whole-grid
+steps"), and the restart that fits the memory budget grows by N^2 / |F|.  The inner KSP has the SNES's own options prefix
+(``-ksp_type``, ``-ksp_gmres_restart``, ``-ksp_pc_side``, ...; the outer KSP is ``preonly``);
+restart SolverSettings.restart of the first free set's size.
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from vecontact.solver.settings import PETSC_FREE_DEFAULTS
+from vecontact.solver.subset import Restricted, SubsetStep
+
+__all__ = ["FreeSetStep"]
+
+
+class FreeSetStep(SubsetStep):
+    """Python PC of the outer (Newton) KSP: y = J^{-1} x up to the inner KSP's tolerance, solved on F.
+
+    ``activate(ksp)``, ``set_active(act, n_active)``, ``set_tolerances``, ``iterations``, ``solves`` and
+    ``release()`` as for ContactSetStep (contactset.py).
+    """
+
+    def __init__(self, op, kappa, PETSc, prefix, settings):
+        super().__init__(op, kappa, PETSc, prefix, settings)
+        self.c_k = op.c * self.kappa         # kappa c: the compliance in units of the Jacobian's rows
+        self.m_k = op.m / self.kappa         # m / kappa: the Jacobian's free rows
+        self.act = None
+        self.n_active = 0
+
+    # ------------------------------------------------------------------ SubsetStep hooks
+    def defaults(self, n_loc):
+        restart = self.comm.allreduce(self.settings.restart(n_loc), op=MPI.MIN)
+        return dict(PETSC_FREE_DEFAULTS, ksp_gmres_restart=str(restart))
+
+    def operator(self):
+        return Restricted(self, self.m_k)
+
+    def preconditioner(self):
+        return Restricted(self, self.c_k, self._rigid_shift)
+
+    def _rigid_shift(self, z, full):
+        z -= self.fft.sum(np.sum(full, where=self.act)) / self.n_active   # <kappa c P_F z>_C removed
+
+    def set_active(self, act, n_active):
+        """Contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""
+        self.act = act
+        self.n_active = int(n_active)
+        n_F = self.fft.N * self.fft.N - self.n_active
+        if n_F > 0:
+            self.select(np.flatnonzero(~act.ravel()), n_F)
+        else:
+            self.n_S = 0
+
+    # ------------------------------------------------------------------ PC interface
+    def apply(self, pc, x, y):
+        r = x.getArray(readonly=True).reshape(self.shape)
+        xo = y.getArray().reshape(self.shape)
+        np.copyto(xo, r)                                  # x_C = r_C
+        if self.n_S == 0:                                 # full contact: J = identity
+            return
+        np.multiply(r, self.act, out=self.w)              # P_C r
+        self.fft.apply(self.w, self.m_k, self.out)        # m P_C r / kappa
+        b = self._b.getArray()
+        np.take(r.ravel(), self.idx, out=b)
+        b -= np.take(self.out.ravel(), self.idx)
+        self.solve()
+        xo.flat[self.idx] = self._y.getArray(readonly=True)
