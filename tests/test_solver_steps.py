@@ -30,6 +30,21 @@ def _operator():
     return ContactOperator(fft, L, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5), 1.0, 1e4, h)
 
 
+def _apply_step(step, act, r):
+    """x = step.apply(r) on the contact set ``act`` (bool N x N); r, x as N x N arrays."""
+    PETSc = petsc()
+    rv = PETSc.Vec().createSeq(N * N)
+    xv = rv.duplicate()
+    try:
+        step.set_active(act, int(np.count_nonzero(act)))
+        rv.getArray()[:] = r.ravel()
+        step.apply(None, rv, xv)
+        return xv.getArray(readonly=True).reshape(N, N).copy()
+    finally:
+        rv.destroy()
+        xv.destroy()
+
+
 @pytest.mark.parametrize("area", [0.1, 0.6])
 @pytest.mark.parametrize("kind", [ContactSetStep, FreeSetStep])
 def test_step_solves_the_newton_system(kind, area):
@@ -39,45 +54,26 @@ def test_step_solves_the_newton_system(kind, area):
     (both tried) fails by O(1)."""
     op = _operator()
     act = op.hhat > np.quantile(op.hhat, 1.0 - area)       # the highest points are in contact
-    PETSc = petsc()
-    step = kind(op, op.kappa, PETSc, "steptest_", SolverSettings())
-    rv = xv = None
+    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings())
     try:
-        step.set_active(act, int(np.count_nonzero(act)))
         step.set_tolerances(1e-13, 0.0, 500)
-        rv = PETSc.Vec().createSeq(N * N)
-        rv.getArray()[:] = np.random.default_rng(7).standard_normal(N * N)
-        xv = rv.duplicate()
-        step.apply(None, rv, xv)
-        r = rv.getArray(readonly=True).reshape(N, N)
-        x = xv.getArray(readonly=True).reshape(N, N)
+        r = np.random.default_rng(7).standard_normal((N, N))
+        x = _apply_step(step, act, r)
         jx = np.where(act, x, op.fft.apply(x, op.m / op.kappa))
         assert np.max(np.abs(jx - r)) <= 1e-9 * np.max(np.abs(r))
         assert step.solves == 1 and 0 < step.iterations < 500
         assert np.max(np.abs(op.m)) / op.kappa < 1e3      # the rounding bound of the docstring holds
     finally:
         step.release()
-        for v in (rv, xv):
-            if v is not None:
-                v.destroy()
 
 
 def test_free_set_step_in_full_contact_is_the_identity():
     """With every point in contact J = identity: the free-set step returns r without an inner solve."""
     op = _operator()
-    PETSc = petsc()
-    step = FreeSetStep(op, op.kappa, PETSc, "steptest_", SolverSettings())
-    rv = xv = None
+    step = FreeSetStep(op, op.kappa, petsc(), "steptest_", SolverSettings())
     try:
-        step.set_active(np.ones((N, N), dtype=bool), N * N)
-        rv = PETSc.Vec().createSeq(N * N)
-        rv.getArray()[:] = np.arange(N * N, dtype=float)
-        xv = rv.duplicate()
-        step.apply(None, rv, xv)
-        np.testing.assert_array_equal(xv.getArray(readonly=True), rv.getArray(readonly=True))
+        r = np.arange(N * N, dtype=float).reshape(N, N)
+        np.testing.assert_array_equal(_apply_step(step, np.ones((N, N), dtype=bool), r), r)
         assert step.solves == 0
     finally:
         step.release()
-        for v in (rv, xv):
-            if v is not None:
-                v.destroy()

@@ -124,8 +124,9 @@ class _Semismooth:
         np.copyto(ya, xa, where=st.act)      # identity rows on the contact set
 
     def linear_iterations(self, snes):
-        """Inner Krylov iterations so far (the outer preonly KSP counts each inner solve as one)."""
-        return snes.getLinearSolveIterations() + sum(s.iterations - s.solves for s in self.steps.values())
+        """Inner Krylov iterations so far: every Newton step is solved by a step's inner KSP (the outer
+        KSP is ``preonly``), so the steps' own counts are the whole (``snes``: the interface of vi.py)."""
+        return sum(s.iterations for s in self.steps.values())
 
     def diagnostics(self, linear_iterations):
         """Active-set changes, linear iterations before each step (and at the end), step-mode switches."""
