@@ -111,7 +111,7 @@ def test_settings_check_their_ranges():
 def test_step_area_by_grid_size():
     s = SolverSettings()
     assert s.step_area(512) == s.step_area(2048) == s.contact_step_area == 0.3
-    assert s.step_area(4096) == s.step_area(8192) == s.contact_step_area_large == 0.15
+    assert s.step_area(4096) == s.step_area(8192) == s.contact_step_area_large == 0.2
 
 
 def test_restart_lengths():

@@ -155,7 +155,7 @@ def test_krylov_kernel_options_global_and_overridable():
 
 def test_auto_step_mode_follows_contact_area():
     """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area(N) (0.3 up to
-    2048^2, 0.15 above), free-set steps above; both give the same solution."""
+    2048^2, 0.2 above), free-set steps above; both give the same solution."""
     from vecontact.solver.settings import SolverSettings
     CONTACT_STEP_AREA = SolverSettings().step_area(64)
     N, L = 64, 1e-4

@@ -13,9 +13,9 @@ Overrides, the last one wins:
    (vecontact/solver/options.py) and checked when the job is loaded.  These options set fields only:
    they never reach PETSc's options database.
 
-PETSc's own options keep their names and their usual effect (``-snes_*``, ``-ksp_*`` for the grid
-steps, ``-contact_ksp_*`` for the inner solve of the contact-set steps); the values vecontact gives them
-unless the user does are the PETSC_* tables at the end.
+PETSc's own options keep their names and their usual effect (``-snes_*``, ``-ksp_*`` for the inner
+solve of the free-set steps, ``-contact_ksp_*`` for that of the contact-set steps); the values vecontact
+gives them unless the user does are the PETSC_* tables at the end.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ class SolverSettings:
                               choices=("auto", "contact", "free"))
     contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 (N <= ..._large_n) [RESULTS.md]",
                                      lo=0, hi=1)
-    contact_step_area_large: float = _knob(0.15, "auto: the same on grids N > contact_step_large_n [RESULTS.md]",
+    contact_step_area_large: float = _knob(0.2, "auto: the same on grids N > contact_step_large_n [RESULTS.md]",
                                            lo=0, hi=1)
     contact_step_large_n: int = _knob(2048, "grid size above which contact_step_area_large applies", lo=0)
     # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
