@@ -7,9 +7,14 @@ Core-hours are the solver's own seconds times the ranks of each case (``/cases``
 and ``ranks``: the solve, not the theory, the file or the farm's waits), summed over the converged
 cases; the code version of a row is the ``git_commit`` of its run in ``/runs`` (rows grouped by it).  With ``--reference``
 the cases converged in both files (same q1, seed, velocity and pressure) are compared: A/A0 in
-contact points (|dA| N^2) and mu relative.  Output: a table, then as LAST line one JSON object with
-``core_hours`` per N, converged ``cases`` and ``planned`` cases (the stored job's) per N,
-``core_hours_n`` (the grid of ``--n``; null until all its planned cases converged) and, with a reference, ``compared``, ``max_points`` and ``max_mu_rel``.
+contact points (|dA| N^2) and mu relative, and what they cost in each file (FFT pairs and core-hours,
+summed per N and velocity over those cases only, so a partial rerun is comparable case for case).
+Output: tables, then as LAST line one JSON object with ``core_hours`` per N, converged ``cases`` and
+``planned`` cases (the stored job's) per N, ``core_hours_n`` (the grid of ``--n``; null until all its
+planned cases converged) and, with a reference, ``compared``, ``max_points``, ``max_mu_rel`` and
+``ratios`` per N (``pairs`` and ``core_hours``: this file's sums over the reference's, same cases;
+``machine``: the time ratio over the cases whose FFT pairs are equal in both, i.e. solved the same
+way, which measures the two runs' machines; ``core_hours_same_machine``: core_hours / machine).
 """
 import argparse
 import json
@@ -55,10 +60,15 @@ def cost(cases, runs):
     return rows, per_n, count
 
 
+SAME_PATH_RTOL = 1e-9   # FFT pairs equal to this: the case took the same path through the solver
+
+
 def compare(cases, ref):
-    """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu)."""
+    """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums) with
+    sums[(N, velocity)] = [cases, pairs here, pairs in ref, core-seconds here, core-seconds in ref,
+    the same two core-seconds over the cases whose FFT pairs are equal in both files]."""
     index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
-    n, points, mu = 0, 0.0, 0.0
+    n, points, mu, sums = 0, 0.0, 0.0, {}
     for r in cases[cases["converged"] == 1]:
         o = index.get(tuple(float(r[k]) for k in KEY))
         if o is None:
@@ -66,7 +76,27 @@ def compare(cases, ref):
         n += 1
         points = max(points, abs(float(r["area"]) - float(o["area"])) * float(r["N"]) ** 2)
         mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
-    return n, points, mu
+        here, there = float(r["seconds"] * r["ranks"]), float(o["seconds"] * o["ranks"])
+        same = abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
+        row = [1, float(r["fft_pairs"]), float(o["fft_pairs"]), here, there, here * same, there * same]
+        key = (int(r["N"]), float(r["velocity"]))
+        sums[key] = [x + y for x, y in zip(sums.get(key, [0] * len(row)), row)]
+    return n, points, mu, sums
+
+
+def ratios(sums):
+    """Per N over every velocity of ``sums`` (compare): ``pairs`` and ``core_hours`` (here / ref),
+    ``machine`` (core-seconds here / ref over the same-path cases: the two machines' speed ratio, null
+    without such cases) and ``core_hours_same_machine`` (core_hours / machine)."""
+    out = {}
+    for (N, _), s in sums.items():
+        out[N] = [x + y for x, y in zip(out.get(N, [0] * len(s)), s)]
+    res = {}
+    for N, t in out.items():
+        machine = t[5] / t[6] if t[6] > 0 else None
+        res[N] = dict(pairs=t[1] / t[2], core_hours=t[3] / t[4], machine=machine,
+                      core_hours_same_machine=t[3] / t[4] / machine if machine else None)
+    return res
 
 
 def main(argv=None):
@@ -86,9 +116,19 @@ def main(argv=None):
                core_hours_n=per_n.get(args.n) if complete else None)
     if args.reference:
         ref, _, _ = load(args.reference)
-        n, points, mu = compare(cases, ref)
+        n, points, mu, sums = compare(cases, ref)
         print(f"against {args.reference}: {n} cases in both, max |dA| {points:.0f} points, max |dmu|/mu {mu:.1e}")
-        out.update(compared=n, max_points=points, max_mu_rel=mu)
+        print(f"{'N':>5s} {'v (m/s)':>8s} {'cases':>5s} {'pairs':>9s} {'ref pairs':>9s} {'ratio':>6s} "
+              f"{'core-h':>7s} {'ref core-h':>10s} {'ratio':>6s}")
+        for (N, v), s in sorted(sums.items()):
+            print(f"{N:5d} {v:8g} {s[0]:5d} {s[1]:9.1f} {s[2]:9.1f} {s[1] / s[2]:6.3f} "
+                  f"{s[3] / 3600:7.3f} {s[4] / 3600:10.3f} {s[3] / s[4]:6.3f}")
+        rat = ratios(sums)
+        for N, r in sorted(rat.items()):
+            if r["machine"] is not None:
+                print(f"{N:5d}: same-path cases (equal FFT pairs) took {r['machine']:.3f}x the reference's "
+                      f"time, so at the reference's speed the core-hours ratio is {r['core_hours_same_machine']:.3f}")
+        out.update(compared=n, max_points=points, max_mu_rel=mu, ratios=rat)
     print(json.dumps(out))
     return 0
 

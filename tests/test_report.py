@@ -177,6 +177,26 @@ def test_study_cost_benchmark(study_files, tmp_path):
         assert abs(res["core_hours"][str(N)] - want) <= 1e-12 * want
     assert res["core_hours_n"] == res["core_hours"]["64"]
     assert res["compared"] == len(cases) and res["max_points"] == 0 and res["max_mu_rel"] == 0
+    for N in ("64", "128"):
+        assert abs(res["ratios"][N]["pairs"] - 1) <= 1e-12 and abs(res["ratios"][N]["core_hours"] - 1) <= 1e-12
+        assert abs(res["ratios"][N]["machine"] - 1) <= 1e-12   # every case took the same path
+    # a reference whose 64^2 cases took 4x the pairs and 2x the seconds, and whose 128^2 cases at
+    # 1 m/s are missing: the ratios are over the cases in both only
+    ref = tmp_path / "ref.h5"
+    shutil.copy(out, ref)
+    with h5py.File(ref, "r+") as f:
+        c = f["cases"][()]
+        c["fft_pairs"][c["N"] == 64] *= 4
+        c["seconds"][c["N"] == 64] *= 2
+        del f["cases"]
+        f.create_dataset("cases", data=c[(c["N"] != 128) | (c["velocity"] != 1.0)])
+    res = run(out, "--reference", str(ref))
+    assert res["compared"] == len(cases) - 2 * 3
+    assert abs(res["ratios"]["64"]["pairs"] - 0.25) <= 1e-12 and abs(res["ratios"]["64"]["core_hours"] - 0.5) <= 1e-12
+    assert abs(res["ratios"]["128"]["pairs"] - 1) <= 1e-12 and abs(res["ratios"]["128"]["core_hours"] - 1) <= 1e-12
+    # 64^2: no case took the same path (4x the pairs), so no machine ratio; 128^2: all of them did
+    assert res["ratios"]["64"]["machine"] is None and res["ratios"]["64"]["core_hours_same_machine"] is None
+    assert abs(res["ratios"]["128"]["core_hours_same_machine"] - 1) <= 1e-12
     partial = tmp_path / "partial.h5"
     shutil.copy(out, partial)
     with h5py.File(partial, "r+") as f:
