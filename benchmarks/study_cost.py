@@ -65,7 +65,7 @@ SAME_PATH_RTOL = 1e-9   # FFT pairs equal to this: the case took the same path t
 
 def compare(cases, ref):
     """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums) with
-    sums[(N, velocity)] = [cases, pairs here, pairs in ref, core-seconds here, core-seconds in ref,
+    sums[(N, velocity)] = array [cases, pairs here, pairs in ref, core-seconds here, core-seconds in ref,
     the same two core-seconds over the cases whose FFT pairs are equal in both files]."""
     index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
     n, points, mu, sums = 0, 0.0, 0.0, {}
@@ -78,9 +78,9 @@ def compare(cases, ref):
         mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
         here, there = float(r["seconds"] * r["ranks"]), float(o["seconds"] * o["ranks"])
         same = abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
-        row = [1, float(r["fft_pairs"]), float(o["fft_pairs"]), here, there, here * same, there * same]
+        row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same], dtype=float)
         key = (int(r["N"]), float(r["velocity"]))
-        sums[key] = [x + y for x, y in zip(sums.get(key, [0] * len(row)), row)]
+        sums[key] = sums.get(key, 0.0) + row
     return n, points, mu, sums
 
 
@@ -90,12 +90,12 @@ def ratios(sums):
     without such cases) and ``core_hours_same_machine`` (core_hours / machine)."""
     out = {}
     for (N, _), s in sums.items():
-        out[N] = [x + y for x, y in zip(out.get(N, [0] * len(s)), s)]
+        out[N] = out.get(N, 0.0) + s
     res = {}
     for N, t in out.items():
-        machine = t[5] / t[6] if t[6] > 0 else None
-        res[N] = dict(pairs=t[1] / t[2], core_hours=t[3] / t[4], machine=machine,
-                      core_hours_same_machine=t[3] / t[4] / machine if machine else None)
+        machine = float(t[5] / t[6]) if t[6] > 0 else None
+        res[N] = dict(pairs=float(t[1] / t[2]), core_hours=float(t[3] / t[4]), machine=machine,
+                      core_hours_same_machine=float(t[3] / t[4] / machine) if machine else None)
     return res
 
 
@@ -121,7 +121,7 @@ def main(argv=None):
         print(f"{'N':>5s} {'v (m/s)':>8s} {'cases':>5s} {'pairs':>9s} {'ref pairs':>9s} {'ratio':>6s} "
               f"{'core-h':>7s} {'ref core-h':>10s} {'ratio':>6s}")
         for (N, v), s in sorted(sums.items()):
-            print(f"{N:5d} {v:8g} {s[0]:5d} {s[1]:9.1f} {s[2]:9.1f} {s[1] / s[2]:6.3f} "
+            print(f"{N:5d} {v:8g} {int(s[0]):5d} {s[1]:9.1f} {s[2]:9.1f} {s[1] / s[2]:6.3f} "
                   f"{s[3] / 3600:7.3f} {s[4] / 3600:10.3f} {s[3] / s[4]:6.3f}")
         rat = ratios(sums)
         for N, r in sorted(rat.items()):
