@@ -88,14 +88,14 @@ class ContactSetStep(SubsetStep):
         np.multiply(r, self.freef, out=w)
         w *= self.kappa                                   # s_F = kappa r_F, 0 on C
         s0 = -self.fft.sum(w) / self.n_S
-        w.flat[idx] = s0                                  # s~
+        w.reshape(-1)[idx] = s0                           # s~
         fft.apply(w, self.op.c, self.out)                 # c s~
         b = self._b.getArray()
         np.take(r.ravel(), idx, out=b)
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
         self.solve()
-        w.flat[idx] += self._y.getArray(readonly=True)    # s
+        w.reshape(-1)[idx] += self._y.getArray(readonly=True)   # s
         fft.apply(w, self.op.c, xo)                       # c s
         # rigid shift; x = c s + e on C too, so that m x = s exactly: the inner residual stays a
         # small gap error on C instead of turning into pressures (m rho) on F that upset the set

@@ -25,7 +25,7 @@ class Restricted:
 
     def _apply(self, x, y):
         s = self.step
-        s.buf.flat[s.idx] = x.getArray(readonly=True)
+        s.buf.reshape(-1)[s.idx] = x.getArray(readonly=True)   # not .flat[idx] nor np.put: slower (RESULTS.md)
         s.fft.apply(s.buf, self.multiplier, s.out)
         ya = y.getArray()
         np.take(s.out.ravel(), s.idx, out=ya)
@@ -88,7 +88,7 @@ class SubsetStep:
     def select(self, idx, n_S):
         """Make S the local points ``idx`` (flat, sorted), ``n_S`` points on all ranks (> 0)."""
         PETSc = self.PETSc
-        self.buf.flat[self.idx] = 0.0
+        self.buf.reshape(-1)[self.idx] = 0.0
         n_loc = int(idx.size)
         self.idx = idx
         self.n_S = int(n_S)

@@ -76,16 +76,16 @@ class ViNewton:
         """y = (multiplier x~)_I with x~ = x on I, 0 elsewhere; ``shift_off``: minus the mean off I first."""
         st = self.state
         self.full[...] = 0.0
-        self.full.flat[idx] = x.getArray(readonly=True)
+        self.full.reshape(-1)[idx] = x.getArray(readonly=True)
         st.fft.apply(self.full, multiplier, self.out)
         if shift_off:
             mask = np.ones(st.shape, dtype=bool)
-            mask.flat[idx] = False
+            mask.reshape(-1)[idx] = False
             buf = np.array([np.sum(self.out, where=mask), np.count_nonzero(mask)], dtype=float)
             st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
             if buf[1] > 0:
                 self.out -= buf[0] / buf[1]
-        y.getArray()[:] = self.out.flat[idx]
+        np.take(self.out.ravel(), idx, out=y.getArray())
 
 
 class _SubMat:
