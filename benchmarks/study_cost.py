@@ -2,6 +2,7 @@
 
 Usage (from the repository root):
     python benchmarks/study_cost.py results/paper.h5 [--reference OTHER.h5] [--n 4096]
+                                    [--machine-commit PREFIX]
 
 Core-hours are the solver's own seconds times the ranks of each case (``/cases`` columns ``seconds``
 and ``ranks``: the solve, not the theory, the file or the farm's waits), summed over the converged
@@ -15,6 +16,8 @@ planned cases converged) and, with a reference, ``compared``, ``max_points``, ``
 ``ratios`` per N (``pairs`` and ``core_hours``: this file's sums over the reference's, same cases;
 ``machine``: the time ratio over the cases whose FFT pairs are equal in both, i.e. solved the same
 way, which measures the two runs' machines; ``core_hours_same_machine``: core_hours / machine).
+``--machine-commit PREFIX`` keeps only this file's rows solved by a commit starting with PREFIX in
+``machine``: a later code version can take the same path at another speed.
 """
 import argparse
 import json
@@ -63,13 +66,15 @@ def cost(cases, runs):
 SAME_PATH_RTOL = 1e-9   # FFT pairs equal to this: the case took the same path through the solver
 
 
-def compare(cases, ref):
+def compare(cases, ref, machine=None):
     """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums) with
     sums[(N, velocity)] = array [cases, pairs here, pairs in ref, core-seconds here, core-seconds in ref,
-    the same two core-seconds over the cases whose FFT pairs are equal in both files]."""
+    the same two core-seconds over the cases whose FFT pairs are equal in both files and, if given,
+    whose entry of the bool array ``machine`` (aligned with ``cases``) is True]."""
     index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
     n, points, mu, sums = 0, 0.0, 0.0, {}
-    for r in cases[cases["converged"] == 1]:
+    usable = np.ones(len(cases), dtype=bool) if machine is None else np.asarray(machine, dtype=bool)
+    for r, use in zip(cases[cases["converged"] == 1], usable[cases["converged"] == 1]):
         o = index.get(tuple(float(r[k]) for k in KEY))
         if o is None:
             continue
@@ -77,7 +82,7 @@ def compare(cases, ref):
         points = max(points, abs(float(r["area"]) - float(o["area"])) * float(r["N"]) ** 2)
         mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
         here, there = float(r["seconds"] * r["ranks"]), float(o["seconds"] * o["ranks"])
-        same = abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
+        same = use and abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
         row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same], dtype=float)
         key = (int(r["N"]), float(r["velocity"]))
         sums[key] = sums.get(key, 0.0) + row
@@ -104,6 +109,8 @@ def main(argv=None):
     ap.add_argument("results")
     ap.add_argument("--reference", help="another results file of the same job: cases compared")
     ap.add_argument("--n", type=int, default=4096, help="grid whose total is reported as core_hours_n")
+    ap.add_argument("--machine-commit", metavar="PREFIX",
+                    help="only this file's rows solved by a commit starting with PREFIX measure the machines")
     args = ap.parse_args(argv)
     cases, runs, planned = load(args.results)
     rows, per_n, count = cost(cases, runs)
@@ -116,7 +123,10 @@ def main(argv=None):
                core_hours_n=per_n.get(args.n) if complete else None)
     if args.reference:
         ref, _, _ = load(args.reference)
-        n, points, mu, sums = compare(cases, ref)
+        machine = None
+        if args.machine_commit:
+            machine = np.array([runs.get(int(r), "?").startswith(args.machine_commit) for r in cases["run"]])
+        n, points, mu, sums = compare(cases, ref, machine)
         print(f"against {args.reference}: {n} cases in both, max |dA| {points:.0f} points, max |dmu|/mu {mu:.1e}")
         print(f"{'N':>5s} {'v (m/s)':>8s} {'cases':>5s} {'pairs':>9s} {'ref pairs':>9s} {'ratio':>6s} "
               f"{'core-h':>7s} {'ref core-h':>10s} {'ratio':>6s}")

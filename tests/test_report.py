@@ -197,6 +197,13 @@ def test_study_cost_benchmark(study_files, tmp_path):
     # 64^2: no case took the same path (4x the pairs), so no machine ratio; 128^2: all of them did
     assert res["ratios"]["64"]["machine"] is None and res["ratios"]["64"]["core_hours_same_machine"] is None
     assert abs(res["ratios"]["128"]["core_hours_same_machine"] - 1) <= 1e-12
+    # --machine-commit: rows of other commits do not measure the machines
+    from vecontact.status import read_status
+    commit = str(read_status(str(out))["runs"][0].get("git_commit") or "?")
+    res = run(out, "--reference", str(ref), "--machine-commit", commit[:7])
+    assert abs(res["ratios"]["128"]["machine"] - 1) <= 1e-12
+    res = run(out, "--reference", str(ref), "--machine-commit", "no-such-commit")
+    assert res["ratios"]["128"]["machine"] is None and abs(res["ratios"]["128"]["core_hours"] - 1) <= 1e-12
     partial = tmp_path / "partial.h5"
     shutil.copy(out, partial)
     with h5py.File(partial, "r+") as f:
