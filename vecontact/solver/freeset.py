@@ -60,7 +60,7 @@ class FreeSetStep(SubsetStep):
         return Restricted(self, self.c_k, self._rigid_shift)
 
     def _rigid_shift(self, z, full):
-        # <kappa c P_F z>_C removed; the sum over C is the grid's minus F's (4x cheaper than where=act)
+        # <kappa c P_F z>_C removed; the sum over C is the grid's minus F's (not where=act: RESULTS.md)
         z -= self.fft.sum(np.sum(full) - np.sum(z)) / self.n_active
 
     def set_active(self, act, n_active):

@@ -78,14 +78,13 @@ class ViNewton:
         self.full[...] = 0.0
         self.full.reshape(-1)[idx] = x.getArray(readonly=True)
         st.fft.apply(self.full, multiplier, self.out)
-        if shift_off:
-            mask = np.ones(st.shape, dtype=bool)
-            mask.reshape(-1)[idx] = False
-            buf = np.array([np.sum(self.out, where=mask), np.count_nonzero(mask)], dtype=float)
+        ya = y.getArray()
+        np.take(self.out.ravel(), idx, out=ya)
+        if shift_off:   # sum and count off I: the grid's minus I's (not a masked sum: RESULTS.md)
+            buf = np.array([np.sum(self.out) - np.sum(ya), self.out.size - idx.size], dtype=float)
             st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
             if buf[1] > 0:
-                self.out -= buf[0] / buf[1]
-        np.take(self.out.ravel(), idx, out=y.getArray())
+                ya -= buf[0] / buf[1]
 
 
 class _SubMat:
