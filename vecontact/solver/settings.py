@@ -77,7 +77,7 @@ class SolverSettings:
     # --- coarse grids and warm starts (contact.py, warmstart.py)
     coarse_min_n: int = _knob(64, "coarsest grid size (N/2, N/4, ... down to this) [RESULTS.md]", lo=2)
     coarse_levels: int = _knob(3, "coarse grids at most", lo=0)
-    coarse_tol: float = _knob(1e-4, "convergence tolerance on the coarse grids (the fine one's if larger)",
+    coarse_tol: float = _knob(0.1, "convergence tolerance on the coarse grids (the fine one's if larger) [RESULTS.md]",
                               lo=0, hi=1, lo_open=True)
     coarse_max_it: int = _knob(50, "Newton iterations per coarse grid", lo=1)
     smooth_sweeps: int = _knob(4, "projected-Jacobi sweeps after each prolongation", lo=0)
