@@ -138,6 +138,7 @@ def worker(args):
                       t_pair=t_pair, levels=r.diagnostics["levels"], reason=r.reason,
                       lin_history=r.diagnostics["linear_history"],
                       set_changes=r.diagnostics["active_set_changes"],
+                      history=r.diagnostics["history"],
                       oracle_iterations=orc["iterations"], oracle_pairs=orc["pairs"],
                       oracle_converged=orc["converged"], overhead=r.fft_pairs / orc["pairs"],
                       blas_lib=_loaded_blas()))   # after the solve: PETSc (and its libblas) is loaded

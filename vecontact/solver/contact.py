@@ -50,7 +50,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         sweep).  snes: its gap, restricted to the coarsest grid, replaces the cold start there (with
         coarse=False the fine grid restarts from it directly); pk: its pressure (rescaled to the new
         sigma0) starts the CG.
-    coarse : snes only; solve on N/8, N/4, N/2 (those >= settings.coarse_min_n, at most
+    coarse : snes only; solve on ..., N/4, N/2 (those >= settings.coarse_min_n, at most
         settings.coarse_levels of them) first, each warm-starting the next by trigonometric
         interpolation + settings.smooth_sweeps projected-Jacobi sweeps (see warmstart.py); the coarse
         grids hold all the roughness of null-band surfaces.  Ignored when N is too small.

@@ -76,11 +76,11 @@ class SolverSettings:
     restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
     # --- coarse grids and warm starts (contact.py, warmstart.py)
     coarse_min_n: int = _knob(64, "coarsest grid size (N/2, N/4, ... down to this) [RESULTS.md]", lo=2)
-    coarse_levels: int = _knob(3, "coarse grids at most", lo=0)
+    coarse_levels: int = _knob(6, "coarse grids at most (6: down to coarse_min_n up to 4096^2) [RESULTS.md]", lo=0)
     coarse_tol: float = _knob(0.1, "convergence tolerance on the coarse grids (the fine one's if larger) [RESULTS.md]",
                               lo=0, hi=1, lo_open=True)
     coarse_max_it: int = _knob(50, "Newton iterations per coarse grid", lo=1)
-    smooth_sweeps: int = _knob(4, "projected-Jacobi sweeps after each prolongation", lo=0)
+    smooth_sweeps: int = _knob(16, "projected-Jacobi sweeps after each prolongation [RESULTS.md]", lo=0)
     smooth_omega: float = _knob(0.7, "their damping (< 2; every mode damped below ~60 deg loss angle)",
                                 lo=0, hi=2, lo_open=True)
     bearing_area_min: float = _knob(1e-4, "cold start: Persson's A/A0 estimate clipped to at least this",
