@@ -50,8 +50,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         sweep).  snes: its gap, restricted to the coarsest grid, replaces the cold start there (with
         coarse=False the fine grid restarts from it directly); pk: its pressure (rescaled to the new
         sigma0) starts the CG.
-    coarse : snes only; solve on ..., N/4, N/2 (those >= settings.coarse_min_n, at most
-        settings.coarse_levels of them) first, each warm-starting the next by trigonometric
+    coarse : snes only; solve on the coarse grids N/2^k >= settings.coarse_min_n (at most
+        settings.coarse_levels of them, coarsest first), each warm-starting the next by trigonometric
         interpolation + settings.smooth_sweeps projected-Jacobi sweeps (see warmstart.py); the coarse
         grids hold all the roughness of null-band surfaces.  Ignored when N is too small.
     max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it) or CG
