@@ -77,3 +77,25 @@ def test_free_set_step_in_full_contact_is_the_identity():
         assert step.solves == 0
     finally:
         step.release()
+
+
+@pytest.mark.parametrize("kind", [ContactSetStep, FreeSetStep])
+def test_step_iterates_even_when_its_atol_is_met_at_once(kind):
+    """ksp_min_it 1 (settings.PETSC_*_DEFAULTS): with an atol far above the first residual the inner
+    Krylov solve still takes an iteration and moves x toward J^{-1} r.  Without it the step returned a
+    zero inner update: a Newton step that left the iterate where it was (tol 0.1, 512^2: residuals
+    0.141, 0.141, 0.141; benchmarks/RESULTS.md)."""
+    op = _operator()
+    act = op.hhat > np.quantile(op.hhat, 0.7)
+    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings())
+    try:
+        step.set_tolerances(0.1, 1e30, 50)
+        r = np.random.default_rng(7).standard_normal((N, N))
+        x = _apply_step(step, act, r)
+        assert step.solves == 1 and step.iterations == 1
+        # one iteration from zero reduces the Newton residual |J x - r| below |r| (GMRES is monotone;
+        # the eliminated rows are exact), by far more than rounding
+        jx = np.where(act, x, op.fft.apply(x, op.m / op.kappa))
+        assert np.linalg.norm(jx - r) < 0.99 * np.linalg.norm(r)
+    finally:
+        step.release()

@@ -180,11 +180,13 @@ PETSC_VI_DEFAULTS = {
     "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (docs/conventions.md §7)
     "snes_linesearch_type": "basic",
 }
+# ksp_min_it 1 in both inner KSPs: a step whose first residual already met its atol would otherwise
+# return a zero update, i.e. a whole Newton step that leaves the iterate short of tol [RESULTS.md]
 # inner KSP of the contact-set steps (prefix <solver>contact_); ksp_gmres_restart from inner_restart()
-PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres"}
+PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres", "ksp_min_it": "1"}
 # inner KSP of the free-set steps (the solver prefix itself, freeset.py): the PC is a fixed linear map,
 # so right-preconditioned GMRES does what FGMRES does with half the basis; ksp_gmres_restart from
 # restart() of the free set's size [RESULTS.md]
-PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right"}
+PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right", "ksp_min_it": "1"}
 # global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}
