@@ -1,6 +1,7 @@
 """Analysis of a study (vecontact.analysis): seed ensembles, curve fits and the sweep's bookkeeping,
 checked against hand-computable synthetic data."""
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -112,6 +113,20 @@ def test_interpolation_and_log_slope():
     assert np.isnan(got[2:]).all()                                     # no extrapolation
     assert interpolate(x, np.log(x), [4.0], log_y=False)[0] == pytest.approx(math.log(4.0), rel=1e-14)
     assert log_slope(x, y, 3.0) == pytest.approx(0.5, rel=1e-14) and math.isnan(log_slope(x, y, 10.0))
+
+
+def test_log_interpolation_of_a_quantity_that_reaches_zero():
+    """The perimeter is 0 at full contact: the interval ending there is interpolated linearly in y (its
+    ln y does not exist), the others still in ln y; no RuntimeWarning (log of 0)."""
+    x = np.array([0.25, 0.5, 1.0])
+    y = np.array([0.4, 0.2, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = interpolate(x, y, [math.sqrt(0.125), 0.75, 0.5, 1.0])
+    assert got[0] == pytest.approx(math.sqrt(0.08), rel=1e-14)         # geometric mean: ln y linear in ln x
+    t = math.log(1.5) / math.log(2.0)                                  # 0.75 on the ln x axis of [0.5, 1]
+    assert got[1] == pytest.approx(0.2 * (1.0 - t), rel=1e-14)         # was 0 (exp of -inf)
+    assert got[2] == pytest.approx(0.2, rel=1e-14) and got[3] == 0.0   # the samples themselves
 
 
 def test_theory_error_and_bands():

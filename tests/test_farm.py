@@ -441,7 +441,8 @@ def test_interrupt_keeps_the_finished_cases(tmp_path, nranks, signame, whom):
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or a scheduler's SIGTERM to
     mpiexec, mid-sweep: one line, exit status 128 + signal, no traceback nor MPI/PETSc messages, the
     finished cases committed; the same command resumes (and removes a temporary file a killed write
-    may have left: about 1 run in 10 with SIGINT to the whole group, cause not found)."""
+    may have left, also when the killed rank was still dying, or a zombie, as the resume opened the file:
+    about 1 run in 10 with SIGINT to the whole group; see test_stale_temporaries_removed_live_ones_kept)."""
     kw = dict(q1=(4.0e6,), seeds=(1, 2), pressure={"area_min": 0.02, "area_max": 0.4, "num": 6})
     job = write_job(tmp_path / "job.yaml", **kw)
     out = tmp_path / "out.h5"

@@ -208,15 +208,26 @@ def test_unconverged_cases_are_never_drawn():
 
 def test_stale_temporaries_removed_live_ones_kept(tmp_path):
     """A writer killed mid-write leaves <output>.tmp-<pid>: the next open removes it, unless a live
-    process has that pid."""
+    process has that pid.  A zombie (exited, not yet reaped: a rank mpiexec has just killed) is not
+    live: its file goes too (the resume after a Ctrl-C kept one, about 1 run in 10)."""
     import subprocess
     import sys
+    import time
     from vecontact.io.results import remove_stale_temporaries
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
-    out = tmp_path / "out.h5"
-    for name in (f"out.h5.tmp-{dead}", f"out.h5.tmp-{os.getppid()}", "out.h5.tmp-x", "other.h5.tmp-1"):
-        (tmp_path / name).write_bytes(b"partial")
-    remove_stale_temporaries(str(out))
+    zombie = subprocess.Popen([sys.executable, "-c", "pass"])      # not waited for: a zombie once it exits
+    try:
+        t0 = time.time()
+        while open(f"/proc/{zombie.pid}/stat").read().rsplit(")", 1)[1].split()[0] != "Z":
+            assert time.time() - t0 < 30, "the child did not exit"
+            time.sleep(0.01)
+        out = tmp_path / "out.h5"
+        for name in (f"out.h5.tmp-{dead}", f"out.h5.tmp-{zombie.pid}", f"out.h5.tmp-{os.getppid()}",
+                     "out.h5.tmp-x", "other.h5.tmp-1"):
+            (tmp_path / name).write_bytes(b"partial")
+        remove_stale_temporaries(str(out))
+    finally:
+        zombie.wait()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [f"out.h5.tmp-{os.getppid()}", "out.h5.tmp-x", "other.h5.tmp-1"])

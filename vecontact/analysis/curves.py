@@ -95,15 +95,20 @@ def peak(x, y):
 
 def interpolate(x, y, at, log_y=True):
     """y at ``at`` by linear interpolation in ln x (x rising) of ln y (``log_y``) or of y (for
-    quantities near 1 or of either sign); NaN outside [x[0], x[-1]] (no extrapolation)."""
+    quantities near 1 or of either sign); NaN outside [x[0], x[-1]] (no extrapolation).
+
+    With ``log_y``, an interval with an end at y <= 0 (the contact perimeter at full contact) has no
+    ln y: it is interpolated linearly in y instead (ln of 0 would give 0 across the whole interval)."""
     x, y, at = np.asarray(x, float), np.asarray(y, float), np.asarray(at, float)
     if x.size == 0:
         return np.full(at.shape, np.nan)
     inside = (at >= x[0]) & (at <= x[-1])
+    u, lx = np.log(at), np.log(x)
+    out = np.interp(u, lx, y)
     if log_y:
-        out = np.exp(np.interp(np.log(at), np.log(x), np.log(y)))
-    else:
-        out = np.interp(np.log(at), np.log(x), y)
+        # NaN for ln y <= 0 spreads only to the intervals that touch it
+        logged = np.exp(np.interp(u, lx, np.log(np.where(y > 0, y, np.nan))))
+        out = np.where(np.isnan(logged), out, logged)
     return np.where(inside, out, np.nan)
 
 

@@ -115,20 +115,32 @@ def atomic_h5(path, fill):
             os.remove(tmp)
 
 
+def _process_alive(pid):
+    """True while a process with this pid runs on this host.  A zombie (dead, not yet reaped by its
+    parent, e.g. a rank that mpiexec killed a moment ago) is not alive: it can write nothing more."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:             # someone else's process: alive
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            state = fh.read().rsplit(")", 1)[1].split()[0]   # the name in (...) may contain spaces
+    except (OSError, IndexError):                            # no /proc (macOS): trust kill
+        return True
+    return state not in ("Z", "X")
+
+
 def remove_stale_temporaries(path):
     """Remove ``<path>.tmp-<pid>`` files left by a writer killed mid-write (kill -9, a batch
     system's SIGKILL) whose process is gone from this host; the file itself never depends on them."""
     for tmp in glob.glob(glob.escape(path) + TMP_INFIX + "*"):
         pid = tmp.rsplit(TMP_INFIX, 1)[1]
-        if not pid.isdigit() or int(pid) == os.getpid():
+        if not pid.isdigit() or int(pid) == os.getpid() or _process_alive(int(pid)):
             continue
-        try:
-            os.kill(int(pid), 0)    # no error: a live process of that pid, leave its file alone
-        except ProcessLookupError:
-            with contextlib.suppress(OSError):
-                os.remove(tmp)
-        except OSError:
-            pass
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
 
 
 def write_fields_file(path, case_name, arrays, attrs):
@@ -257,6 +269,8 @@ class ResultsFile:
         """Atomically (re)write the main file with everything finished so far."""
         self.complete = complete
         atomic_h5(self.path, self._fill)
+        # again after every commit: a killed writer may still have been dying when this run opened
+        remove_stale_temporaries(self.path)
 
     def _fill(self, f):
         f.attrs["format"] = FORMAT
