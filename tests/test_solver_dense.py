@@ -123,18 +123,24 @@ def test_warm_start_from_other_load():
     compare(res, f, ref, h, sigma0, name, "snes warm")
 
 
-@pytest.mark.parametrize("step", ["contact", "free"])
+@pytest.mark.parametrize("step, cycle", [("contact", 0), ("free", 0), ("free", 4)])
 @pytest.mark.parametrize("v,sigma0", [(1.0, 2e4), (30.0, 5e4)])
-def test_newton_step_modes_vs_dense(step, v, sigma0):
+def test_newton_step_modes_vs_dense(step, cycle, v, sigma0):
     """Both ways of solving the Newton step (on the contact set / on the free set, chosen by area in
-    ``auto``) forced for a whole solve: the same exact solution."""
+    ``auto``; the free set by plain GMRES, or by FGMRES over GMRES(4) cycles once a step used its cap)
+    forced for a whole solve: the same exact solution."""
     N, name = 32, "hn"
     h = surface(N)
     ref = reference(N, name, v, sigma0)
-    opts = {"vc_contact_step": step}
+    opts = {"vc_contact_step": step, "vc_free_cycle": cycle}
+    if cycle:   # caps of 3 iterations: the first step uses its cap, so the cycles start (StepPolicy.cycling)
+        opts.update(vc_lin_maxit_changing=3, vc_cycle_after_cap=3)
     res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF, coarse=False,
                         petsc_options=opts)
     compare(res, f, ref, h, sigma0, name, f"snes step={step} v={v}")
+    if cycle:   # the steps after the first ran in whole cycles of 4
+        its = np.diff(res.diagnostics["linear_history"])
+        assert its[0] == 3 and len(its) > 1 and np.all(its[1:] % cycle == 0), its
 
 
 @pytest.mark.parametrize("N,name,v,sigma0", [(32, "hn", 1.0, 2e4), (32, "hn", 30.0, 5e4),

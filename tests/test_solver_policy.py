@@ -62,6 +62,39 @@ def test_loose_while_the_set_changes_then_exact():
     assert p.changes == [-1, 3035, 340, 0, 0]
 
 
+def _steps_with_iterations(policy, steps):
+    """Like _run, with the Krylov iterations each step took reported before the next one."""
+    out = []
+    for its, (res, change, mode) in steps:
+        if its is not None:
+            policy.record_iterations(its)
+        policy.record_residual(res)
+        out.append(policy.step(change, mode))
+    return out
+
+
+@pytest.mark.parametrize("first_mode, cap, first_its, cycles", [
+    ("free", 80, 80, True),      # a changing free-set step used a whole cap of >= 80: long solves, cycles
+    ("free", 80, 79, False),     # under its cap: plain GMRES stays
+    ("free", 40, 40, False),     # a whole first cap of 40 (0.1-1 m/s, where the cycles lose) is not enough
+    ("contact", 80, 80, False),  # the cap of a contact-set step says nothing of the free set's
+])
+def test_cycles_after_a_capped_free_set_step(first_mode, cap, first_its, cycles):
+    """free_cycle > 0: ``cycling`` turns on once a changing free-set step ends on an iteration cap of at
+    least cycle_after_cap, and stays on; an exact free-set step then gets cycle_max_it, not ksp_max_it."""
+    s = SolverSettings(free_cycle=20, ksp_max_it=400, cycle_max_it=800, cycle_after_cap=80,
+                       lin_maxit_changing=cap)
+    p = StepPolicy(s, 1e-8)
+    got = _steps_with_iterations(p, [(None, (1.0, -1, first_mode)), (first_its, (0.1, 500, "free")),
+                                     (10, (0.01, 0, "free")), (10, (1e-3, 0, "contact"))])
+    assert got[0][2] == cap and p.cycling is cycles
+    assert got[2][2] == (800 if cycles else 400)       # the exact free-set step
+    assert got[3][2] == 400                             # contact-set steps keep ksp_max_it
+    off = StepPolicy(SolverSettings(free_cycle=0), 1e-8)
+    _steps_with_iterations(off, [(None, (1.0, -1, "free")), (10 ** 6, (0.1, 500, "free"))])
+    assert not off.cycling                             # free_cycle 0: never
+
+
 def test_wandering_tightens_down_to_the_floors():
     """Each wandering step: rtol x tighten_factor down to lin_rtol_min, the iteration cap x
     tighten_maxit_factor up to ksp_max_it."""

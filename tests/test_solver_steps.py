@@ -51,23 +51,48 @@ def _jacobian(op, act, x):
 
 
 @pytest.mark.parametrize("area", [0.1, 0.6])
-@pytest.mark.parametrize("kind", [ContactSetStep, FreeSetStep])
-def test_step_solves_the_newton_system(kind, area):
+@pytest.mark.parametrize("kind, cycle", [(ContactSetStep, 0), (FreeSetStep, 0), (FreeSetStep, 5)])
+def test_step_solves_the_newton_system(kind, cycle, area):
     """Inner rtol 1e-13 on a 32^2 grid: |J x - r| <= 1e-9 max|r| leaves room for the FFT's rounding
     (m / kappa amplifies it by at most max|m| / kappa < 1e3, asserted) and nothing for a wrong
     elimination: dropping the contact step's rigid shift or the free step's coupling term m P_C r_C
-    (both tried) fails by O(1)."""
+    (both tried) fails by O(1).  ``cycle``: the free set solved by FGMRES over GMRES(5) cycles
+    (free_cycle), whose iterations come in whole cycles."""
     op = _operator()
     act = op.hhat > np.quantile(op.hhat, 1.0 - area)       # the highest points are in contact
-    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings())
+    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=cycle))
     try:
+        if cycle:
+            step.set_active(act, int(np.count_nonzero(act)))
+            step.start_cycles()
         step.set_tolerances(1e-13, 0.0, 500)
         r = np.random.default_rng(7).standard_normal((N, N))
         x = _apply_step(step, act, r)
         jx = _jacobian(op, act, x)
         assert np.max(np.abs(jx - r)) <= 1e-9 * np.max(np.abs(r))
         assert step.solves == 1 and 0 < step.iterations < 500
+        assert step.iterations % max(cycle, 1) == 0
         assert np.max(np.abs(op.m)) / op.kappa < 1e3      # the rounding bound of the docstring holds
+    finally:
+        step.release()
+
+
+def test_cycled_free_set_step_counts_and_caps_inner_iterations():
+    """free_cycle 5, cycling: the cap counts GMRES iterations, rounded up to whole cycles (12 -> 3 cycles, 15
+    iterations), and every cycle runs all its 5 (an rtol the solve cannot meet makes it use the cap);
+    the FFT pairs show it: 1 for the step, then per cycle 5 x 2 (operator and PC) + 1 (the inner
+    solution's PC) + 1 (the outer FGMRES's operator)."""
+    op = _operator()
+    act = op.hhat > np.quantile(op.hhat, 0.4)
+    step = FreeSetStep(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=5))
+    try:
+        step.set_active(act, int(np.count_nonzero(act)))
+        step.start_cycles()                                 # the policy's call once a step used its cap
+        step.set_tolerances(1e-30, 0.0, 12)
+        op.fft.reset_counters()
+        _apply_step(step, act, np.random.default_rng(7).standard_normal((N, N)))
+        assert step.iterations == 15 and step.solves == 1
+        assert op.fft.pairs == 1 + 3 * (5 * 2 + 1 + 1)
     finally:
         step.release()
 

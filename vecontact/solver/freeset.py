@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from vecontact.solver.settings import PETSC_FREE_DEFAULTS
+from vecontact.solver.settings import PETSC_FREE_CYCLE_DEFAULTS, PETSC_FREE_DEFAULTS
 from vecontact.solver.subset import Restricted, SubsetStep
 
 __all__ = ["FreeSetStep"]
@@ -52,6 +52,21 @@ class FreeSetStep(SubsetStep):
     def defaults(self, n_loc):
         restart = self.comm.allreduce(self.settings.restart(n_loc), op=MPI.MIN)
         return dict(PETSC_FREE_DEFAULTS, ksp_gmres_restart=str(restart))
+
+    def start_cycles(self):
+        """From the next solve on, FGMRES over cycles of free_cycle GMRES iterations (StepPolicy.cycling):
+        a short outer basis, so little orthogonalisation an iteration.  Nothing when free_cycle is 0,
+        when it already runs so, or when the user chose the inner KSP's type (-ksp_type).  Collective."""
+        k = self.settings.free_cycle
+        if k == 0 or self.cycle > 1 or self._prefix + "ksp_type" not in self._own_keys:
+            return
+        restart = self.comm.allreduce(self.settings.restart(self.idx.size, vectors=2, reserve=k + 1), op=MPI.MIN)
+        self.configure(dict(PETSC_FREE_CYCLE_DEFAULTS, ksp_gmres_restart=str(restart), ksp_ksp_max_it=str(k),
+                            ksp_ksp_gmres_restart=str(k)))
+
+    def set_tolerances(self, rtol, atol, max_it):
+        """``max_it`` counts GMRES iterations: in cycles (start_cycles), whole cycles of the outer FGMRES."""
+        super().set_tolerances(rtol, atol, -(-max_it // self.cycle))
 
     def operator(self):
         return Restricted(self, self.m_k)

@@ -13,7 +13,10 @@ Tolerances (rtol, atol, max_it) of a step's Krylov solve:
   (x tighten_factor down to lin_rtol_min, x tighten_maxit_factor up to ksp_max_it) whenever
   ``tighten_steps`` says the steps make too little progress;
 * once the set stopped changing the step is the solution (PDAS converges in one more step): exact_rtol,
-  ksp_max_it iterations, and the absolute tolerance decides.  atol = tol / kappa bounds the free-set
+  ksp_max_it iterations (cycle_max_it on the free set once ``cycling``), and the absolute tolerance decides.
+
+Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
+iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).  atol = tol / kappa bounds the free-set
   residual in h_rms (its 2-norm bounds the max-norm measure); a contact-set step's residual is a gap
   error on C whose image under m is what the measure sees, hence inner_atol_factor x atol.  If an exact
   step on an unchanged set still did not converge, atol x atol_retry_factor.
@@ -62,10 +65,25 @@ class StepPolicy:
         self.maxit_changing = settings.lin_maxit_changing
         self.changes = []
         self.residuals = []
+        self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (see cycle)
+        self._last = None          # (mode, change, cap) of the latest step
 
     def record_residual(self, residual):
         """The convergence measure of the latest iterate."""
         self.residuals.append(residual)
+
+    def record_iterations(self, iterations):
+        """Krylov iterations of the latest step.  A changing free-set step that used the whole of a
+        tightened cap (at least cycle_after_cap) announces long solves, where the plain GMRES basis costs
+        more orthogonalisation than the extra iterations of FGMRES over GMRES(free_cycle) cycles:
+        ``cycling`` turns on for the rest of the solve.  Solves whose steps stay under the first caps
+        (slow sliding) keep plain GMRES, where the cycles lose [RESULTS.md]."""
+        s = self.settings
+        if self._last is None or s.free_cycle == 0:
+            return
+        mode, change, cap = self._last
+        if mode == "free" and change != 0 and cap >= s.cycle_after_cap and iterations >= cap:
+            self.cycling = True
 
     def step(self, change, mode):
         """(rtol, atol, max_it) of the next step's Krylov solve, or None when ``own`` is False.
@@ -86,6 +104,10 @@ class StepPolicy:
             self.maxit_changing = min(s.tighten_maxit_factor * self.maxit_changing, s.ksp_max_it)
         atol = self.atol * (s.inner_atol_factor if mode == "contact" else 1.0)
         if change == 0:
-            return s.exact_rtol, atol, s.ksp_max_it
+            cap = s.cycle_max_it if self.cycling and mode == "free" else s.ksp_max_it
+            self._last = (mode, change, cap)
+            return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
-        return rtol, atol, min(s.ksp_max_it, self.maxit_changing)
+        cap = min(s.ksp_max_it, self.maxit_changing)
+        self._last = (mode, change, cap)
+        return rtol, atol, cap

@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 
 __all__ = ["SolverSettings", "PREFIX", "PETSC_DEFAULTS", "PETSC_VI_DEFAULTS", "PETSC_INNER_DEFAULTS",
-           "PETSC_FREE_DEFAULTS", "PETSC_GLOBAL_DEFAULTS", "gmres_restart"]
+           "PETSC_FREE_DEFAULTS", "PETSC_FREE_CYCLE_DEFAULTS", "PETSC_GLOBAL_DEFAULTS", "gmres_restart"]
 
 PREFIX = "vc_"
 
@@ -71,6 +71,11 @@ class SolverSettings:
                              lo=1)
     restart_memory: float = _knob(3e9, "bytes per rank for the free-set steps' Krylov basis [RESULTS.md]",
                                   lo=0, lo_open=True)
+    free_cycle: int = _knob(20, "long free-set solves: FGMRES over cycles of this many GMRES its (0: never) [RESULTS.md]",
+                            lo=0)
+    cycle_after_cap: int = _knob(80, "cycles start after a changing free-set step used a cap of >= this [RESULTS.md]",
+                                 lo=1)
+    cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(1.5e9, "bytes per rank for the inner FGMRES basis", lo=0, lo_open=True)
     restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
@@ -103,10 +108,12 @@ class SolverSettings:
         """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set (N x N grid)."""
         return self.contact_step_area if N <= self.contact_step_large_n else self.contact_step_area_large
 
-    def restart(self, n_local, vectors=1):
+    def restart(self, n_local, vectors=1, reserve=0):
         """GMRES restart of the free-set steps (n_local: local free points; GMRES: 1 basis vector an
-        iteration, FGMRES and the VI method's whole-grid FGMRES: 2)."""
-        return gmres_restart(n_local, self.restart_memory, vectors, self.restart_max, self.restart_min)
+        iteration, FGMRES and the VI method's whole-grid FGMRES: 2; ``reserve``: vectors of the budget
+        held elsewhere, the inner GMRES of free_cycle)."""
+        return gmres_restart(n_local, self.restart_memory - 8.0 * reserve * n_local, vectors, self.restart_max,
+                             self.restart_min)
 
     def inner_restart(self, n_local):
         """FGMRES restart of the inner solve of the contact-set steps (n_local: local contact points)."""
@@ -188,5 +195,11 @@ PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres", "ksp_min_it": "1"}
 # so right-preconditioned GMRES does what FGMRES does with half the basis; ksp_gmres_restart from
 # restart() of the free set's size [RESULTS.md]
 PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right", "ksp_min_it": "1"}
+# the same with free_cycle k > 0: FGMRES whose PC (PCKSP, inner prefix <solver>ksp_) runs exactly k
+# right-preconditioned GMRES iterations; the outer basis is short, so the orthogonalisation is cheap
+# [RESULTS.md]; ksp_gmres_restart from restart(), ksp_ksp_max_it and ksp_ksp_gmres_restart = k
+PETSC_FREE_CYCLE_DEFAULTS = {"ksp_type": "fgmres", "ksp_min_it": "1", "pc_type": "ksp", "ksp_ksp_type": "gmres",
+                             "ksp_ksp_pc_side": "right", "ksp_ksp_rtol": "1e-30", "ksp_ksp_atol": "0",
+                             "ksp_ksp_min_it": "0"}
 # global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}

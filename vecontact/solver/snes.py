@@ -112,7 +112,11 @@ class _Semismooth:
             self.mode = mode
             self.modes.append((len(self.lin_history) - 1, mode))
         step.set_active(st.act, st.nact)
+        if len(self.lin_history) >= 2:
+            self.policy.record_iterations(self.lin_history[-1] - self.lin_history[-2])
         tolerances = self.policy.step(change, mode)
+        if self.policy.cycling and mode == "free":
+            step.start_cycles()
         if tolerances is not None:
             step.set_tolerances(*tolerances)
 

@@ -66,6 +66,7 @@ class SubsetStep:
         self.idx = np.zeros(0, dtype=np.intp)
         self.n_S = 0
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
+        self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
         self._A = self._b = self._y = None
         self.ksp = PETSc.KSP().create(comm=self.comm)
@@ -77,6 +78,7 @@ class SubsetStep:
     def activate(self, ksp):
         """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
         ksp.setType("preonly")
+        ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
 
     def set_tolerances(self, rtol, atol, max_it):
@@ -107,22 +109,39 @@ class SubsetStep:
             self._y = self._A.createVecRight()
         self.ksp.setOperators(self._A)
         if not self._configured:
-            opts = PETSc.Options()
-            for k, v in self.defaults(n_loc).items():
-                if not opts.hasName(self._prefix + k):
-                    opts[self._prefix + k] = v
-                    self._own_keys.append(self._prefix + k)
-            pc = self.ksp.getPC()
-            pc.setType("python")
-            pc.setPythonContext(self.preconditioner())
-            self.ksp.setFromOptions()
+            self.configure(self.defaults(n_loc))
             self._configured = True
+
+    def configure(self, defaults):
+        """Put ``defaults`` into the options database under the inner prefix (where the user has not set
+        the key; this step's own earlier defaults are replaced), then set the inner KSP from it.  A
+        ``-pc_type ksp`` there nests it (free_cycle): the Python PC goes to the inner KSP of PCKSP, and
+        ``cycle`` becomes that KSP's iteration count, which it always runs in full."""
+        opts = self.PETSc.Options()
+        for k, v in defaults.items():
+            key = self._prefix + k
+            if key in self._own_keys or not opts.hasName(key):
+                opts[key] = v
+                if key not in self._own_keys:
+                    self._own_keys.append(key)
+        pc = self.ksp.getPC()
+        pc.setType("python")
+        pc.setPythonContext(self.preconditioner())
+        self.ksp.setFromOptions()
+        self.cycle = 1
+        if pc.getType() == "ksp":
+            inner = pc.getKSP()
+            inner.getPC().setType("python")
+            inner.setFromOptions()
+            inner.getPC().setType("python")
+            inner.getPC().setPythonContext(self.preconditioner())
+            self.cycle = inner.getTolerances()[3]
 
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
         self._y.set(0.0)
         self.ksp.solve(self._b, self._y)
-        self.iterations += self.ksp.getIterationNumber()
+        self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
 
     def release(self):
