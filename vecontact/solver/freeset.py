@@ -22,6 +22,11 @@ iterations and less time at high speed (benchmarks/RESULTS.md, "Free-set steps r
 steps"), and the restart that fits the memory budget grows by N^2 / |F|.  The inner KSP has the SNES's own options prefix
 (``-ksp_type``, ``-ksp_gmres_restart``, ``-ksp_pc_side``, ...; the outer KSP is ``preonly``);
 restart SolverSettings.restart of the first free set's size.
+
+Long solves (fast sliding at large A/A0) switch to cycles (``start_cycles``, when StepPolicy.cycling
+says so): FGMRES preconditioned by exactly SolverSettings.free_cycle iterations of the same GMRES
+(PETSc's PCKSP, inner options ``-ksp_ksp_*``).  The outer basis stays short, which cuts the
+orthogonalisation that makes up half of such a solve (benchmarks/RESULTS.md, "free_cycle").
 """
 from __future__ import annotations
 
