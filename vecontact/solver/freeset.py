@@ -65,7 +65,8 @@ class FreeSetStep(SubsetStep):
         k = self.settings.free_cycle
         if k == 0 or self.cycle > 1 or self._prefix + "ksp_type" not in self._own_keys:
             return
-        restart = self.comm.allreduce(self.settings.restart(self.idx.size, vectors=2, reserve=k + 1), op=MPI.MIN)
+        restart = self.settings.restart(self.idx.size, vectors=2, reserve=k + 1)
+        restart = self.comm.allreduce(restart, op=MPI.MIN)
         self.configure(dict(PETSC_FREE_CYCLE_DEFAULTS, ksp_gmres_restart=str(restart), ksp_ksp_max_it=str(k),
                             ksp_ksp_gmres_restart=str(k)))
 

@@ -13,13 +13,14 @@ Tolerances (rtol, atol, max_it) of a step's Krylov solve:
   (x tighten_factor down to lin_rtol_min, x tighten_maxit_factor up to ksp_max_it) whenever
   ``tighten_steps`` says the steps make too little progress;
 * once the set stopped changing the step is the solution (PDAS converges in one more step): exact_rtol,
-  ksp_max_it iterations (cycle_max_it on the free set once ``cycling``), and the absolute tolerance decides.
-
-Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
-iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).  atol = tol / kappa bounds the free-set
+  ksp_max_it iterations (cycle_max_it on the free set once ``cycling``), and the absolute tolerance
+  decides.  atol = tol / kappa bounds the free-set
   residual in h_rms (its 2-norm bounds the max-norm measure); a contact-set step's residual is a gap
   error on C whose image under m is what the measure sees, hence inner_atol_factor x atol.  If an exact
   step on an unchanged set still did not converge, atol x atol_retry_factor.
+
+Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
+iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
 """
 from __future__ import annotations
 
@@ -65,7 +66,7 @@ class StepPolicy:
         self.maxit_changing = settings.lin_maxit_changing
         self.changes = []
         self.residuals = []
-        self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (see cycle)
+        self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (record_iterations)
         self._last = None          # (mode, change, cap) of the latest step
 
     def record_residual(self, residual):

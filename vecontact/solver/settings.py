@@ -71,8 +71,8 @@ class SolverSettings:
                              lo=1)
     restart_memory: float = _knob(3e9, "bytes per rank for the free-set steps' Krylov basis [RESULTS.md]",
                                   lo=0, lo_open=True)
-    free_cycle: int = _knob(20, "long free-set solves: FGMRES over cycles of this many GMRES its (0: never) [RESULTS.md]",
-                            lo=0)
+    free_cycle: int = _knob(20, "long free-set solves: FGMRES over cycles of this many GMRES its (0: never) "
+                            "[RESULTS.md]", lo=0)
     cycle_after_cap: int = _knob(80, "cycles start after a changing free-set step used a cap of >= this [RESULTS.md]",
                                  lo=1)
     cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
@@ -198,8 +198,8 @@ PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right", "ksp_min_it"
 # the same with free_cycle k > 0: FGMRES whose PC (PCKSP, inner prefix <solver>ksp_) runs exactly k
 # right-preconditioned GMRES iterations; the outer basis is short, so the orthogonalisation is cheap
 # [RESULTS.md]; ksp_gmres_restart from restart(), ksp_ksp_max_it and ksp_ksp_gmres_restart = k
-PETSC_FREE_CYCLE_DEFAULTS = {"ksp_type": "fgmres", "ksp_min_it": "1", "pc_type": "ksp", "ksp_ksp_type": "gmres",
-                             "ksp_ksp_pc_side": "right", "ksp_ksp_rtol": "1e-30", "ksp_ksp_atol": "0",
-                             "ksp_ksp_min_it": "0"}
+PETSC_FREE_CYCLE_DEFAULTS = dict(PETSC_FREE_DEFAULTS, ksp_type="fgmres", pc_type="ksp", ksp_ksp_type="gmres",
+                                 ksp_ksp_pc_side="right", ksp_ksp_rtol="1e-30", ksp_ksp_atol="0",
+                                 ksp_ksp_min_it="0")
 # global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}

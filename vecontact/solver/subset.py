@@ -132,9 +132,8 @@ class SubsetStep:
         if pc.getType() == "ksp":
             inner = pc.getKSP()
             inner.getPC().setType("python")
-            inner.setFromOptions()
-            inner.getPC().setType("python")
             inner.getPC().setPythonContext(self.preconditioner())
+            inner.setFromOptions()
             self.cycle = inner.getTolerances()[3]
 
     def solve(self):
