@@ -116,11 +116,13 @@ def test_step_area_by_grid_size():
 
 def test_restart_lengths():
     """The cap, unless the basis exceeds the memory budget: 4096^2 on 2 ranks (8 Mi local points,
-    3 GB): GMRES 43, FGMRES 21; never below restart_min."""
+    3 GB): GMRES 43, FGMRES 21; never below restart_min.  The contact-set steps' inner FGMRES has the
+    same budget: 18 % of that grid (1.5 Mi local points) gets restart 100 (61 with the 1.5 GB of session 19)."""
     s = SolverSettings()
     n = 4096 * 2048
     assert s.restart(n, vectors=1) == 43 and s.restart(n, vectors=2) == 21
     assert s.restart(1000) == s.restart_max == 120
     assert s.restart(10 ** 10) == s.restart_min == 10
     assert s.inner_restart(1000) == s.inner_restart_max == 100
-    assert s.inner_restart(n) == gmres_restart(n, 1.5e9, 2, 100, 10) == 10
+    assert s.inner_restart(n) == gmres_restart(n, 3e9, 2, 100, 10) == 21
+    assert s.inner_restart(int(0.18 * n)) == 100 and s.inner_restart(int(0.27 * n)) == 81

@@ -77,7 +77,8 @@ class SolverSettings:
                                  lo=1)
     cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
-    inner_restart_memory: float = _knob(1.5e9, "bytes per rank for the inner FGMRES basis", lo=0, lo_open=True)
+    inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
+                                        lo_open=True)
     restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
     # --- coarse grids and warm starts (contact.py, warmstart.py)
     coarse_min_n: int = _knob(64, "coarsest grid size (N/2, N/4, ... down to this) [RESULTS.md]", lo=2)
