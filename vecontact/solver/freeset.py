@@ -70,10 +70,6 @@ class FreeSetStep(SubsetStep):
         self.configure(dict(PETSC_FREE_CYCLE_DEFAULTS, ksp_gmres_restart=str(restart), ksp_ksp_max_it=str(k),
                             ksp_ksp_gmres_restart=str(k)))
 
-    def set_tolerances(self, rtol, atol, max_it):
-        """``max_it`` counts GMRES iterations: in cycles (start_cycles), whole cycles of the outer FGMRES."""
-        super().set_tolerances(rtol, atol, -(-max_it // self.cycle))
-
     def operator(self):
         return Restricted(self, self.m_k)
 

@@ -82,7 +82,8 @@ class SubsetStep:
         ksp.getPC().setPythonContext(self)
 
     def set_tolerances(self, rtol, atol, max_it):
-        self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=max_it)
+        """``max_it`` counts Krylov iterations; nested (``cycle`` > 1), whole cycles of the outer KSP."""
+        self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=-(-max_it // self.cycle))
 
     def setUp(self, pc):
         pass
