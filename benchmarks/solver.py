@@ -139,6 +139,7 @@ def worker(args):
                       lin_history=r.diagnostics["linear_history"],
                       set_changes=r.diagnostics["active_set_changes"],
                       history=r.diagnostics["history"],
+                      measure_checks=r.diagnostics["measure_checks"],
                       oracle_iterations=orc["iterations"], oracle_pairs=orc["pairs"],
                       oracle_converged=orc["converged"], overhead=r.fft_pairs / orc["pairs"],
                       blas_lib=_loaded_blas()))   # after the solve: PETSc (and its libblas) is loaded

@@ -106,6 +106,7 @@ def test_solver_state_is_freed_collective(comm):
     import gc
     from vecontact.solver.contactset import ContactSetStep
     from vecontact.solver.freeset import FreeSetStep
+    from vecontact.solver.measurestop import MeasureStop
     from vecontact.solver.newton import NewtonState
     from vecontact.solver.snes import _Semismooth
     N = 48
@@ -115,6 +116,77 @@ def test_solver_state_is_freed_collective(comm):
                             petsc_options={"vc_contact_step": step})
         assert res.converged
         gc.collect()
-        kinds = (ContactSetStep, FreeSetStep, NewtonState, _Semismooth)
+        kinds = (ContactSetStep, FreeSetStep, NewtonState, _Semismooth, MeasureStop)
         alive = [type(o).__name__ for o in gc.get_objects() if isinstance(o, kinds)]
         assert alive == [], (step, alive)
+
+
+
+@pytest.mark.parametrize("N, v, sigma0", [(256, 10.0, 1e6), (512, 0.01, 4.5e4)])
+def test_measure_stop_collective(comm, N, v, sigma0):
+    """The measure stop of exact steps (measurestop.py) on 2 ranks, on the free set (256^2, A/A0 ~ 0.58)
+    and on the contact set (512^2, ~ 0.27): its looks are collective (a trial iterate's pressure and
+    measure, the vectors of the step's current set) and give the same stop on every rank; the answer
+    is one rank's to the solver's tolerance (A/A0 to a few contact-line points, mu to 1e-6)."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.surface import generate
+    from vecontact.physics.spectrum import SelfAffine
+    from vecontact.solver import solve_contact
+    tol = 1e-8
+    psd = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
+    out = []
+    for c in (comm, comm.Split(comm.rank, 0)):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        h = generate(fft, L_PAPER, psd, 1)
+        out.append(solve_contact(fft, L_PAPER, h, hn(), v, sigma0, tolerance=tol, store=()))
+    res, one = out
+    same_on_all_ranks(comm, res)
+    looks = res.diagnostics["measure_checks"]
+    assert comm.allgather(looks) == [looks] * comm.size
+    assert res.converged and one.converged and looks and looks[-1][2] <= tol, looks
+    assert res.residual == pytest.approx(looks[-1][2], rel=1e-9)
+    assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
+
+
+def test_measure_stop_follows_the_step_vectors_collective(comm):
+    """A look builds the update into a copy of the step's inner vector; when the next contact set
+    changes one rank's share only, the step remakes its vectors (collectively, subset.py) and the stop
+    must follow on every rank (a test of the local size once left the other rank waiting: deadlock).
+    With tol 1e30 every armed solve stops at its first look, after one iteration."""
+    from vecontact.solver.contactset import ContactSetStep
+    from vecontact.solver.measurestop import MeasureStop
+    from vecontact.solver.newton import NewtonState
+    from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.settings import SolverSettings
+    from vecontact.solver.snes import hold_comm, petsc
+    PETSc = petsc()
+    N = 32
+    fft = make_fft(comm, N)
+    hold_comm(comm)
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=4)
+    rows = slice(fft.row_start, fft.row_stop)
+    op = ContactOperator(fft, L_PAPER, hn(), 1.0, 2e4, np.ascontiguousarray(h[rows]))
+    state = NewtonState(op)
+    state.ensure(-op.hhat)
+    high = h > np.quantile(h, 0.8)
+    first_rows = np.arange(N)[:, None] < N // 4 + np.zeros((1, N))     # rank 0's rows on 2 ranks
+    sets = (high, high | (first_rows & (h > np.quantile(h, 0.6))))
+    step = ContactSetStep(op, op.kappa, PETSc, "mstest_", SolverSettings())
+    stop = MeasureStop(state, 1e30, PETSc)
+    stop.attach(step)
+    r = PETSc.Vec().createMPI((h[rows].size, N * N), comm=comm)
+    x = r.duplicate()
+    try:
+        r.getArray()[:] = np.random.default_rng(1).standard_normal((N, N))[rows].ravel()
+        for k, act in enumerate(sets):
+            step.set_active(np.ascontiguousarray(act[rows]), int(np.count_nonzero(act)))
+            step.set_tolerances(1e-12, 0.0, 50)
+            stop.arm(1.0)
+            step.apply(None, r, x)
+            assert step.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.CONVERGED_USER
+            assert len(stop.trace) == k + 1 and stop.trace[-1][0] == 1, stop.trace
+    finally:
+        stop.release()
+        step.release()
+        r.destroy()
+        x.destroy()

@@ -11,6 +11,7 @@ elastic only, the baseline).  Module map:
 * snes.py        the PETSc SNES set-up and callbacks of the semismooth Newton method
 * newton.py      NewtonState: the iterate, its pressure and its active set
 * policy.py      StepPolicy: where and how tightly each Newton step is solved (pure rules)
+* measurestop.py MeasureStop: an exact step's Krylov solve ends once its update meets the SNES's test
 * contactset.py, freeset.py   the two Newton-step solvers (on the contact set, on the free set);
   subset.py: what they share
 * vi.py          -snes_type vinewtonrsls (PETSc's reduced-space VI Newton), the alternative

@@ -169,7 +169,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          history=[(int(a), float(b)) for a, b, *_ in info.get("history", [])],
                          active_set_changes=info.get("nchg", []),
                          linear_history=info.get("lin_history", []),
-                         step_modes=info.get("modes", [])),
+                         step_modes=info.get("modes", []),
+                         measure_checks=info.get("measure_checks", [])),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,

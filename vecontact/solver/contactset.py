@@ -51,6 +51,7 @@ class ContactSetStep(SubsetStep):
     def __init__(self, op, kappa, PETSc, prefix, settings):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings)
         self.freef = self.fft.real_array()   # 1.0 on F, 0.0 on C
+        self.s = self.fft.real_array()       # the pressure increment s of update()
 
     # ------------------------------------------------------------------ SubsetStep hooks
     def defaults(self, n_loc):
@@ -94,12 +95,21 @@ class ContactSetStep(SubsetStep):
         np.take(r.ravel(), idx, out=b)
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
+        self._r = r
         self.solve()
-        w.reshape(-1)[idx] += self._y.getArray(readonly=True)   # s
-        fft.apply(w, self.op.c, xo)                       # c s
+        self.update(self._y, xo)
+
+    def update(self, y, xo):
+        """The whole-grid Newton update ``xo`` (local rows) of the inner solution ``y`` (a Vec on C) for
+        the right-hand side of the running apply (one FFT pair): x = c s + e, s = s~ + y on C."""
+        idx = self.idx
+        s = self.s
+        np.copyto(s, self.w)
+        s.reshape(-1)[idx] += y.getArray(readonly=True)
+        self.fft.apply(s, self.op.c, xo)                  # c s
         # rigid shift; x = c s + e on C too, so that m x = s exactly: the inner residual stays a
         # small gap error on C instead of turning into pressures (m rho) on F that upset the set
-        e = self.mean_C(np.take(r.ravel(), idx) - np.take(xo.ravel(), idx))
+        e = self.mean_C(np.take(self._r.ravel(), idx) - np.take(xo.ravel(), idx))
         xo += e
 
 

@@ -102,5 +102,12 @@ class FreeSetStep(SubsetStep):
         b = self._b.getArray()
         np.take(r.ravel(), self.idx, out=b)
         b -= np.take(self.out.ravel(), self.idx)
+        self._r = r
         self.solve()
-        xo.reshape(-1)[self.idx] = self._y.getArray(readonly=True)
+        self.update(self._y, xo)
+
+    def update(self, y, xo):
+        """The whole-grid Newton update ``xo`` (local rows) of the inner solution ``y`` (a Vec on F) for
+        the right-hand side of the running apply: x_C = r_C, x_F = y.  No FFT."""
+        np.copyto(xo, self._r)
+        xo.reshape(-1)[self.idx] = y.getArray(readonly=True)

@@ -44,6 +44,12 @@ class NewtonState:
         self.op.pressure(self.g, self.p)
         self.valid = True
 
+    def keep(self, g, p):
+        """Make (g, p) the cached iterate: ``p`` is p^(g), computed elsewhere (measurestop.py)."""
+        np.copyto(self.g, g)
+        np.copyto(self.p, p)
+        self.valid = True
+
     def update_active_set(self):
         """C = {p^ >= kappa g^} of the current iterate (never empty: mean p^ = 1 > 0, so the most
         compressed point is taken if no point qualifies).  Returns how many points changed since the

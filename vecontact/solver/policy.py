@@ -17,7 +17,8 @@ Tolerances (rtol, atol, max_it) of a step's Krylov solve:
   decides.  atol = tol / kappa bounds the free-set
   residual in h_rms (its 2-norm bounds the max-norm measure); a contact-set step's residual is a gap
   error on C whose image under m is what the measure sees, hence inner_atol_factor x atol.  If an exact
-  step on an unchanged set still did not converge, atol x atol_retry_factor.
+  step on an unchanged set still did not converge, atol x atol_retry_factor.  The 2-norm atol is a
+  cap: the measure stop (measurestop.py) usually ends an exact step well before it.
 
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
 iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).

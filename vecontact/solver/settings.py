@@ -76,6 +76,8 @@ class SolverSettings:
     cycle_after_cap: int = _knob(80, "cycles start after a changing free-set step used a cap of >= this [RESULTS.md]",
                                  lo=1)
     cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
+    measure_stop: str = _knob("on", "on: an exact step stops once its update meets the SNES's test "
+                              "(measurestop.py) [RESULTS.md]", choices=("on", "off"))
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)

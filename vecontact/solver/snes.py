@@ -17,7 +17,8 @@ the contact set (SolverSettings.contact_step / contact_step_area), and how tight
 * on the free set (freeset.py): KSP ``preonly`` with a Python PC that sets x_C = r_C and runs an
   inner GMRES (the SNES's own prefix: ``-ksp_*``) on the stiffness of the free set, preconditioned by
   its compliance; vectors of (1 - A/A0) N^2 entries, 2 FFT pairs per inner iteration.
-The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py);
+The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py); an
+exact step's solve also ends as soon as its update meets the convergence test (measurestop.py);
 ``-snes_ksp_ew`` or any ``-ksp_``/``-contact_ksp_`` rtol, atol or max_it in the options hand them to
 PETSc instead.  Convergence is decided by our own scale-free test (operator.py), installed with
 SNESSetConvergenceTest.  ``-snes_type vinewtonrsls`` selects PETSc's reduced-space VI method (vi.py).
@@ -33,6 +34,7 @@ from mpi4py import MPI
 
 from vecontact.solver.contactset import ContactSetStep
 from vecontact.solver.freeset import FreeSetStep
+from vecontact.solver.measurestop import MeasureStop
 from vecontact.solver.newton import NewtonState
 from vecontact.solver.policy import StepPolicy, choose_step
 from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PETSC_VI_DEFAULTS
@@ -80,10 +82,11 @@ class _Semismooth:
     Jacobian J x = P_C x + P_F m x / kappa.  Before each Newton step ``jacobian`` moves the state to the
     new active set, lets the policy choose the step solver and its tolerances, and hands both over."""
 
-    def __init__(self, state, policy, steps, settings):
+    def __init__(self, state, policy, steps, settings, stop):
         self.state = state
         self.policy = policy
         self.steps = steps                       # {"contact": ContactSetStep, "free": FreeSetStep}
+        self.stop = stop                         # MeasureStop of the exact steps, or None
         self.settings = settings
         self.m_k = state.op.m / state.kappa      # Jacobian multiplier on the free rows
         self.mode = None                         # where the current step is solved
@@ -119,6 +122,10 @@ class _Semismooth:
             step.start_cycles()
         if tolerances is not None:
             step.set_tolerances(*tolerances)
+        if self.stop is not None and change == 0:
+            self.stop.arm(self.policy.residuals[-1])
+        elif self.stop is not None:
+            self.stop.disarm()
 
     def mult(self, mat, x, y):
         st = self.state
@@ -134,11 +141,14 @@ class _Semismooth:
 
     def diagnostics(self, linear_iterations):
         """Active-set changes, linear iterations before each step (and at the end), step-mode switches."""
-        return dict(nchg=self.policy.changes, lin_history=self.lin_history + [linear_iterations], modes=self.modes)
+        return dict(nchg=self.policy.changes, lin_history=self.lin_history + [linear_iterations], modes=self.modes,
+                    measure_checks=self.stop.trace if self.stop is not None else [])
 
     def release(self):
         for step in self.steps.values():
             step.release()
+        if self.stop is not None:
+            self.stop.release()
         self.ksp = None
 
 
@@ -228,7 +238,12 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF))
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings))
-        form = _Semismooth(state, policy, steps, settings)
+        stop = None
+        if policy.own and settings.measure_stop == "on":
+            stop = MeasureStop(state, tol, PETSc)
+            for step in steps.values():
+                stop.attach(step)
+        form = _Semismooth(state, policy, steps, settings, stop)
     conv = _Convergence(state, policy, tol, monitor)
     _apply_global_options(PETSc, options)
     keys = _apply_options(PETSc, prefix, defaults, options)

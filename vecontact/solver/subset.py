@@ -64,6 +64,7 @@ class SubsetStep:
         self.out = fft.real_array()
         self.w = fft.real_array()
         self.idx = np.zeros(0, dtype=np.intp)
+        self._r = None                  # right-hand side (local rows) of the running apply, for update()
         self.n_S = 0
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)

@@ -1,0 +1,89 @@
+"""Stop an exact Newton step's inner Krylov solve as soon as its update meets the SNES's own test.
+
+Once the active set stopped changing, the step's update is the solution (policy.py).  Its Krylov
+tolerance, atol = tol / kappa on the 2-norm of the step's residual, bounds the max-norm convergence
+measure (operator.py) from above, often by far: the solve would run on after its update already
+converged.  This KSP convergence test, run after PETSc's default one, builds the update of the
+current Krylov iterate from time to time, evaluates the measure of the next Newton iterate g - x
+(one FFT pair, plus what building the update costs) and stops the solve when it is <= tol.  The next
+iterate is then kept, so the SNES's residual evaluation of it costs nothing.
+
+When to look: with the set unchanged, the measure of the next iterate is about kappa ||r||_inf of the
+step's residual r, and the KSP reports ||r||_2; their ratio rho drifts slowly (benchmarks/RESULTS.md,
+"`measure_stop`").  The solve looks when rho x kappa ||r||_2 predicts a measure <= tol,
+rho from the latest look, or before the first one from the current iterate's measure and the step's
+initial residual.  A look that fails (the set changed, or rho grew) only moves the next one later.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MeasureStop"]
+
+
+class MeasureStop:
+    """KSP convergence test of exact Newton steps (``attach`` it to each step's inner KSP once; ``arm`` it
+    before an exact step, ``disarm`` it before the others).  ``trace``: (Krylov iterations of the step so
+    far, in cycles counted as subset.py does, ||r||_2, measure of the trial iterate) of every look; a look costs one FFT pair, and building the
+    update may cost one more (freeset.py / contactset.py ``update``, GMRES's right preconditioner)."""
+
+    def __init__(self, state, tol, PETSc):
+        self.state = state
+        self.tol = float(tol)
+        self.CONVERGED = PETSc.KSP.ConvergedReason.CONVERGED_USER
+        self.armed = False
+        self.trace = []
+        self._g = self._p = self._x = self._y = None
+        self._of = None                 # the step Vec self._y was duplicated from
+        self._measure = None            # the current iterate's measure (arm)
+        self._rho = None
+
+    def attach(self, step):
+        """Add the test to ``step``'s inner KSP, after PETSc's default one (once per step)."""
+        step.ksp.addConvergenceTest(self, args=(step,))
+
+    def arm(self, measure):
+        """Watch the next step's solve; ``measure``: the convergence measure of the current iterate."""
+        self.armed = True
+        self._measure = float(measure)
+        self._rho = None
+
+    def disarm(self):
+        self.armed = False
+
+    def __call__(self, ksp, its, rnorm, step):
+        ITERATING = 0
+        if not self.armed:
+            return ITERATING
+        scale = self.state.kappa * rnorm
+        if its == 0:
+            self._rho = self._measure / scale if scale > 0 else None
+            return ITERATING
+        if self._rho is None or self._rho * scale > self.tol:
+            return ITERATING
+        st = self.state
+        if self._g is None:
+            self._g = st.fft.real_array()
+            self._p = st.fft.real_array()
+            self._x = st.fft.real_array()
+        if self._of is not step._y:       # the step's vectors were remade (collectively: subset.py)
+            if self._y is not None:
+                self._y.destroy()
+            self._y = step._y.duplicate()
+            self._of = step._y
+        ksp.buildSolution(self._y)
+        step.update(self._y, self._x)
+        np.subtract(st.g, self._x, out=self._g)
+        st.op.pressure(self._g, self._p)
+        meas = max(st.op.measures(self._g, self._p))
+        self.trace.append((int(its) * step.cycle, float(rnorm), float(meas)))
+        self._rho = meas / scale if scale > 0 else None
+        if meas <= self.tol:
+            st.keep(self._g, self._p)
+            return self.CONVERGED
+        return ITERATING
+
+    def release(self):
+        if self._y is not None:
+            self._y.destroy()
+        self._y = self._g = self._p = self._x = self._of = None
