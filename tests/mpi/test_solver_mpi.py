@@ -121,7 +121,6 @@ def test_solver_state_is_freed_collective(comm):
         assert alive == [], (step, alive)
 
 
-
 @pytest.mark.parametrize("N, v, sigma0", [(256, 10.0, 1e6), (512, 0.01, 4.5e4)])
 def test_measure_stop_collective(comm, N, v, sigma0):
     """The measure stop of exact steps (measurestop.py) on 2 ranks, on the free set (256^2, A/A0 ~ 0.58)

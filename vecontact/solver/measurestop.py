@@ -23,19 +23,21 @@ __all__ = ["MeasureStop"]
 
 class MeasureStop:
     """KSP convergence test of exact Newton steps (``attach`` it to each step's inner KSP once; ``arm`` it
-    before an exact step, ``disarm`` it before the others).  ``trace``: (Krylov iterations of the step so
-    far, in cycles counted as subset.py does, ||r||_2, measure of the trial iterate) of every look; a look costs one FFT pair, and building the
-    update may cost one more (freeset.py / contactset.py ``update``, GMRES's right preconditioner)."""
+    before an exact step, ``disarm`` it before the others).  ``trace``: (Krylov iterations of the step
+    so far, counted as subset.py does, ||r||_2, measure of the trial iterate) of every look.  A look
+    costs one FFT pair, and building the update may cost one more (freeset.py / contactset.py
+    ``update``, GMRES's right preconditioner)."""
 
     def __init__(self, state, tol, PETSc):
         self.state = state
         self.tol = float(tol)
         self.CONVERGED = PETSc.KSP.ConvergedReason.CONVERGED_USER
+        self.ITERATING = PETSc.KSP.ConvergedReason.ITERATING
         self.armed = False
         self.trace = []
-        self._g = self._p = self._x = self._y = None
-        self._of = None                 # the step Vec self._y was duplicated from
-        self._measure = None            # the current iterate's measure (arm)
+        self._g = self._p = self._y = None     # trial iterate g - x, its pressure; the inner solution
+        self._of = None                        # the step Vec self._y was duplicated from
+        self._measure = None                   # the current iterate's measure (arm)
         self._rho = None
 
     def attach(self, step):
@@ -52,28 +54,26 @@ class MeasureStop:
         self.armed = False
 
     def __call__(self, ksp, its, rnorm, step):
-        ITERATING = 0
         if not self.armed:
-            return ITERATING
+            return self.ITERATING
         scale = self.state.kappa * rnorm
         if its == 0:
             self._rho = self._measure / scale if scale > 0 else None
-            return ITERATING
+            return self.ITERATING
         if self._rho is None or self._rho * scale > self.tol:
-            return ITERATING
+            return self.ITERATING
         st = self.state
         if self._g is None:
             self._g = st.fft.real_array()
             self._p = st.fft.real_array()
-            self._x = st.fft.real_array()
-        if self._of is not step._y:       # the step's vectors were remade (collectively: subset.py)
+        if self._of is not step._y:            # the step's vectors were remade (collectively: subset.py)
             if self._y is not None:
                 self._y.destroy()
             self._y = step._y.duplicate()
             self._of = step._y
         ksp.buildSolution(self._y)
-        step.update(self._y, self._x)
-        np.subtract(st.g, self._x, out=self._g)
+        step.update(self._y, self._g)          # x, then g - x in place
+        np.subtract(st.g, self._g, out=self._g)
         st.op.pressure(self._g, self._p)
         meas = max(st.op.measures(self._g, self._p))
         self.trace.append((int(its) * step.cycle, float(rnorm), float(meas)))
@@ -81,9 +81,9 @@ class MeasureStop:
         if meas <= self.tol:
             st.keep(self._g, self._p)
             return self.CONVERGED
-        return ITERATING
+        return self.ITERATING
 
     def release(self):
         if self._y is not None:
             self._y.destroy()
-        self._y = self._g = self._p = self._x = self._of = None
+        self._y = self._g = self._p = self._of = None
