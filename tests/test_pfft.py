@@ -22,6 +22,11 @@ def test_matches_numpy_one_rank(N):
     pfft_check.check_one(MPI.COMM_WORLD if MPI.COMM_WORLD.size == 1 else MPI.COMM_SELF, N)
 
 
+@pytest.mark.parametrize("N", pfft_check.SIZES)
+def test_single_precision_one_rank(N):
+    pfft_check.check_single(MPI.COMM_WORLD if MPI.COMM_WORLD.size == 1 else MPI.COMM_SELF, N)
+
+
 @pytest.mark.parametrize("nprocs", [2, 3, 4])
 def test_matches_numpy_mpi(nprocs):
     # 4 ranks oversubscribe the 2 cores: N <= 64 only
@@ -47,6 +52,8 @@ def test_bad_arguments():
         SlabFFT(MPI.COMM_SELF, 1, wisdom_file=False)
     with pytest.raises(ValueError):
         SlabFFT(MPI.COMM_SELF, 8, planner="fast", wisdom_file=False)
+    with pytest.raises(ValueError, match="precision"):
+        SlabFFT(MPI.COMM_SELF, 8, precision="half", wisdom_file=False)
     fft = SlabFFT(MPI.COMM_SELF, 8, planner="estimate", wisdom_file=False)
     with pytest.raises(ValueError):
         fft.forward(np.zeros((8, 9)))

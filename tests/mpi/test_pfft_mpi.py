@@ -16,6 +16,7 @@ def test_matches_numpy(comm, N):
     if comm.size > N // 2:
         pytest.skip("too many ranks for this N")
     pfft_check.check_one(comm, N)
+    pfft_check.check_single(comm, N)
 
 
 def test_radial_psd_identical_on_ranks(comm):

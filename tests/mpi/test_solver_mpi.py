@@ -189,3 +189,32 @@ def test_measure_stop_follows_the_step_vectors_collective(comm):
         step.release()
         r.destroy()
         x.destroy()
+
+
+@pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.0e5, "contact")])
+def test_single_steps_collective(comm, sigma0, mode):
+    """Single-precision changing steps (single.py) on 2 ranks: their float32 pairs run on every rank
+    alike (the GMRES sums are float64 and identical on all ranks, so every rank stops at the same
+    iteration), and the answer is one rank's in double precision to the solver's tolerance."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.surface import generate
+    from vecontact.physics.spectrum import SelfAffine
+    from vecontact.solver import solve_contact
+    N, tol = 256, 1e-8
+    psd = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
+    out = []
+    for c, precision in ((comm, "single"), (comm.Split(comm.rank, 0), "double")):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        h = generate(fft, L_PAPER, psd, 1)
+        t0 = fft.single_transforms
+        r = solve_contact(fft, L_PAPER, h, hn(), 10.0, sigma0, tolerance=tol, store=(),
+                          petsc_options={"vc_changing_precision": precision})
+        out.append((r, (fft.single_transforms - t0) / 2))
+    (res, single), (one, none) = out
+    same_on_all_ranks(comm, res)
+    mine = (single, res.diagnostics["linear_history"])
+    assert comm.allgather(mine) == [mine] * comm.size
+    assert single > 0.3 * res.fft_pairs and none == 0
+    assert res.diagnostics["step_modes"][-1][1] == mode
+    assert res.converged and one.converged
+    assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())

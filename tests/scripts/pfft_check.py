@@ -122,10 +122,43 @@ def check_one(comm, N, tol=1e-12):
     fft.free()
 
 
+def check_single(comm, N, tol=2e-6):
+    """The single-precision twin: float32 arrays, numpy's transforms to float32 rounding (6e-8, times
+    the growth of the error with log N and the multiplier's size), its pairs counted in the parent's."""
+    fft = SlabFFT(comm, N, planner="estimate", wisdom_file=False)
+    one = fft.single()
+    assert one is fft.single() and one.single() is one and one.precision == "single"
+    assert one.real_array().dtype == np.float32 and one.fourier_array().dtype == np.complex64
+    assert (one.row_start, one.col_start, one.local_fourier_shape) == (fft.row_start, fft.col_start,
+                                                                       fft.local_fourier_shape)
+    rs, re_, cs, ce = fft.row_start, fft.row_stop, fft.col_start, fft.col_stop
+    rng = np.random.default_rng(2000 + N)
+    full = rng.standard_normal((N, N))
+    mult = rng.standard_normal((N, N // 2 + 1)) + 1j * rng.standard_normal((N, N // 2 + 1))
+    loc = one.real_array()
+    loc[...] = full[rs:re_]
+    refa = np.fft.irfft2(np.fft.rfft2(full) * mult, s=(N, N))
+    a = one.apply(loc, mult[:, cs:ce].astype(np.complex64))
+    assert a.dtype == np.float32
+    err = comm.allreduce(float(np.max(np.abs(a - refa[rs:re_]))), op=MPI.MAX)
+    assert 0 < err < tol * np.max(np.abs(refa)), ("single apply", N, err)   # float32, not float64
+    F = one.forward(loc)
+    assert rel(F, np.fft.rfft2(full)[:, cs:ce]) < tol
+    assert rel(one.backward(F), full[rs:re_]) < tol
+    # the twin's work counts in the parent's counters, as pairs
+    assert one.pairs == 2 and fft.pairs == 2 and fft.n_apply == 0
+    assert fft.transforms == 4 == fft.single_transforms
+    fft.reset_counters()
+    assert one.pairs == 0 and fft.transforms == 0
+    fft.free()
+    one.free()
+
+
 def check_all(comm):
     for N in SIZES:
         if comm.size <= N // 2:
             check_one(comm, N)
+            check_single(comm, N)
 
 
 if __name__ == "__main__":

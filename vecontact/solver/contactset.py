@@ -48,6 +48,8 @@ class ContactSetStep(SubsetStep):
     destroys the inner KSP and its operators and removes the option defaults it put in.
     """
 
+    mode = "contact"
+
     def __init__(self, op, kappa, PETSc, prefix, settings):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings)
         self.freef = self.fft.real_array()   # 1.0 on F, 0.0 on C

@@ -46,6 +46,8 @@ class FreeSetStep(SubsetStep):
     ``release()`` as for ContactSetStep (contactset.py).
     """
 
+    mode = "free"
+
     def __init__(self, op, kappa, PETSc, prefix, settings):
         super().__init__(op, kappa, PETSc, prefix, settings)
         self.c_k = op.c * self.kappa         # kappa c: the compliance in units of the Jacobian's rows
@@ -78,7 +80,8 @@ class FreeSetStep(SubsetStep):
 
     def _rigid_shift(self, z, full):
         # <kappa c P_F z>_C removed; the sum over C is the grid's minus F's (not where=act: RESULTS.md)
-        z -= self.fft.sum(np.sum(full) - np.sum(z)) / self.n_active
+        f8 = np.float64                                   # float32 z, full: sums in float64 (single.py)
+        z -= self.fft.sum(np.sum(full, dtype=f8) - np.sum(z, dtype=f8)) / self.n_active
 
     def set_active(self, act, n_active):
         """Contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""

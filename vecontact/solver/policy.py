@@ -20,6 +20,9 @@ Tolerances (rtol, atol, max_it) of a step's Krylov solve:
   step on an unchanged set still did not converge, atol x atol_retry_factor.  The 2-norm atol is a
   cap: the measure stop (measurestop.py) usually ends an exact step well before it.
 
+A changing step whose rtol is at least single_rtol_min solves in single precision (``single``,
+single.py; changing_precision): its tolerance is far above float32 rounding.
+
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
 iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
 """
@@ -67,6 +70,7 @@ class StepPolicy:
         self.maxit_changing = settings.lin_maxit_changing
         self.changes = []
         self.residuals = []
+        self.single = False        # the latest step solves in single precision (single.py)
         self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (record_iterations)
         self._last = None          # (mode, change, cap) of the latest step
 
@@ -105,11 +109,13 @@ class StepPolicy:
             self.lin_rtol = max(s.tighten_factor * self.lin_rtol, s.lin_rtol_min)
             self.maxit_changing = min(s.tighten_maxit_factor * self.maxit_changing, s.ksp_max_it)
         atol = self.atol * (s.inner_atol_factor if mode == "contact" else 1.0)
+        self.single = False
         if change == 0:
             cap = s.cycle_max_it if self.cycling and mode == "free" else s.ksp_max_it
             self._last = (mode, change, cap)
             return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
         cap = min(s.ksp_max_it, self.maxit_changing)
+        self.single = s.changing_precision == "single" and rtol >= s.single_rtol_min
         self._last = (mode, change, cap)
         return rtol, atol, cap

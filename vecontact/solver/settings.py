@@ -78,6 +78,12 @@ class SolverSettings:
     cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
     measure_stop: str = _knob("on", "on: an exact step stops once its update meets the SNES's test "
                               "(measurestop.py) [RESULTS.md]", choices=("on", "off"))
+    changing_precision: str = _knob("single", "single: the steps whose active set changes solve with a float32 "
+                                    "Krylov basis (single.py) [RESULTS.md]", choices=("single", "double"))
+    single_rtol_min: float = _knob(1e-2, "... only while their rtol is at least this (tighter: the float32 "
+                                   "basis falls short) [RESULTS.md]", lo=0, hi=1, lo_open=True)
+    single_range_max: float = _knob(1.5e5, "... with float32 FFT pairs too while max|m_q|/min|m_q| <= this, else "
+                                    "float64 pairs and a float32 basis [RESULTS.md]", lo=0)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)
@@ -116,6 +122,17 @@ class SolverSettings:
         iteration, FGMRES and the VI method's whole-grid FGMRES: 2; ``reserve``: vectors of the budget
         held elsewhere, the inner GMRES of free_cycle)."""
         return gmres_restart(n_local, self.restart_memory - 8.0 * reserve * n_local, vectors, self.restart_max,
+                             self.restart_min)
+
+    def single_restart(self, n_local, mode, vectors, reserve=0):
+        """Restart of a single-precision step solve (single.py) on the free set (mode "free":
+        restart_max, restart_memory) or the contact set ("contact": the inner_ ones); ``vectors``:
+        float64 vectors' worth of memory an iteration (0.5 for a float32 basis vector); ``reserve``:
+        float32 vectors of the budget held elsewhere (the inner GMRES of cycles)."""
+        if mode == "contact":
+            return gmres_restart(n_local, self.inner_restart_memory, vectors, self.inner_restart_max,
+                                 self.restart_min)
+        return gmres_restart(n_local, self.restart_memory - 4.0 * reserve * n_local, vectors, self.restart_max,
                              self.restart_min)
 
     def inner_restart(self, n_local):

@@ -18,7 +18,8 @@ the contact set (SolverSettings.contact_step / contact_step_area), and how tight
   inner GMRES (the SNES's own prefix: ``-ksp_*``) on the stiffness of the free set, preconditioned by
   its compliance; vectors of (1 - A/A0) N^2 entries, 2 FFT pairs per inner iteration.
 The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py); an
-exact step's solve also ends as soon as its update meets the convergence test (measurestop.py);
+exact step's solve also ends as soon as its update meets the convergence test (measurestop.py); a
+changing step solves with a float32 Krylov basis (single.py, SolverSettings.changing_precision);
 ``-snes_ksp_ew`` or any ``-ksp_``/``-contact_ksp_`` rtol, atol or max_it in the options hand them to
 PETSc instead.  Convergence is decided by our own scale-free test (operator.py), installed with
 SNESSetConvergenceTest.  ``-snes_type vinewtonrsls`` selects PETSc's reduced-space VI method (vi.py).
@@ -121,7 +122,7 @@ class _Semismooth:
         if self.policy.cycling and mode == "free":
             step.start_cycles()
         if tolerances is not None:
-            step.set_tolerances(*tolerances)
+            step.set_tolerances(*tolerances, single=self.policy.single)
         if self.stop is not None and change == 0:
             self.stop.arm(self.policy.residuals[-1])
         elif self.stop is not None:
@@ -142,7 +143,9 @@ class _Semismooth:
     def diagnostics(self, linear_iterations):
         """Active-set changes, linear iterations before each step (and at the end), step-mode switches."""
         return dict(nchg=self.policy.changes, lin_history=self.lin_history + [linear_iterations], modes=self.modes,
-                    measure_checks=self.stop.trace if self.stop is not None else [])
+                    measure_checks=self.stop.trace if self.stop is not None else [],
+                    single_iterations=sum(s.single_iterations for s in self.steps.values()),
+                    float32_pairs=any(s.float32_pairs for s in self.steps.values()))
 
     def release(self):
         for step in self.steps.values():

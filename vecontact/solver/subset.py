@@ -8,29 +8,44 @@ basis vector, and the GMRES restart that fits the memory budget grows by N^2 / |
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from mpi4py import MPI
+
+from vecontact.solver.single import SingleGMRES
 
 __all__ = ["Restricted", "SubsetStep"]
 
 
 class Restricted:
     """y = (multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python Mat
-    and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT."""
+    and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT.  ``grid``:
+    where the product is formed (its ``fft``, ``buf`` zero outside S, ``out``), the step itself or its
+    single-precision copy (``_Single``)."""
 
-    def __init__(self, step, multiplier, post=None):
+    def __init__(self, step, multiplier, post=None, grid=None):
         self.step = step
         self.multiplier = multiplier
         self.post = post
+        self.grid = step if grid is None else grid
+
+    def matvec(self, x, y):
+        """y = the product of x (arrays of the local points of S; y of another precision than the
+        grid's goes through ``grid.gathered``)."""
+        g = self.grid
+        idx = self.step.idx
+        g.buf.reshape(-1)[idx] = x      # not .flat[idx] nor np.put: slower (RESULTS.md)
+        g.fft.apply(g.buf, self.multiplier, g.out)
+        if y.dtype == g.out.dtype:
+            np.take(g.out.ravel(), idx, out=y)
+        else:                           # take's own casting copies (and casts) y's old contents first
+            np.copyto(y, np.take(g.out.ravel(), idx, out=g.gathered(idx.size)), casting="same_kind")
+        if self.post is not None:
+            self.post(y, g.out)
 
     def _apply(self, x, y):
-        s = self.step
-        s.buf.reshape(-1)[s.idx] = x.getArray(readonly=True)   # not .flat[idx] nor np.put: slower (RESULTS.md)
-        s.fft.apply(s.buf, self.multiplier, s.out)
-        ya = y.getArray()
-        np.take(s.out.ravel(), s.idx, out=ya)
-        if self.post is not None:
-            self.post(ya, s.out)
+        self.matvec(x.getArray(readonly=True), y.getArray())
 
     def mult(self, mat, x, y):
         self._apply(x, y)
@@ -40,6 +55,57 @@ class Restricted:
 
     def setUp(self, pc):
         pass
+
+
+class _Single:
+    """What a step's inner solve in single precision (single.py) works with: its operator and
+    preconditioner, in float32 on the SlabFFT's single-precision twin (complex64 multipliers, float32
+    grid buffers) when ``float32_pairs``, else on the step's float64 grid (their float32 results
+    gathered through ``gathered``); and the memory of the GMRES bases (kept between steps, viewed at
+    the size of the current S)."""
+
+    def __init__(self, step, float32_pairs):
+        A, B = step.operator(), step.preconditioner()
+        self.work = np.float32 if float32_pairs else np.float64
+        self.fft = step.fft
+        self.out = step.out
+        self._gathered = np.empty(0)
+        if float32_pairs:
+            self.fft = step.fft.single()
+            self.buf = self.fft.real_array()
+            self.out = self.fft.real_array()
+            m_A, m_B = (np.asarray(o.multiplier).astype(np.complex64) for o in (A, B))
+        else:
+            self.buf = step.buf
+            m_A, m_B = A.multiplier, B.multiplier
+        self.A = Restricted(step, m_A, A.post, grid=self)
+        self.B = Restricted(step, m_B, B.post, grid=self)
+        self._float32 = float32_pairs
+        self._stores = {}
+
+    def free(self):
+        """Drop the bases' memory (made again by the next single-precision solve)."""
+        self._stores = {}
+
+    def clear(self, idx):
+        """Zero the float32 grid buffer at ``idx`` (the step's own is cleared by select)."""
+        if self._float32:
+            self.buf.reshape(-1)[idx] = 0.0
+
+    def gathered(self, n):
+        """A float64 scratch array of n entries."""
+        if self._gathered.size < n:
+            self._gathered = np.empty(n)
+        return self._gathered[:n]
+
+    def gmres(self, slot, n_loc, restart, allsum, flexible):
+        """A SingleGMRES working in the memory of ``slot`` (grown when too small)."""
+        need = SingleGMRES.sizes(n_loc, restart, flexible)
+        stores = self._stores.get(slot)
+        if stores is None or any(a.size < n for a, n in zip(stores, need)):
+            self._stores[slot] = None    # free the old blocks first
+            stores = self._stores[slot] = (np.empty(need[0], dtype=np.float32), np.empty(need[1], dtype=self.work))
+        return SingleGMRES(n_loc, restart, allsum, flexible, self.work, stores[0][:need[0]], stores[1][:need[1]])
 
 
 class SubsetStep:
@@ -66,7 +132,11 @@ class SubsetStep:
         self.idx = np.zeros(0, dtype=np.intp)
         self._r = None                  # right-hand side (local rows) of the running apply, for update()
         self.n_S = 0
+        self.single = False             # the next solves in single precision (set_tolerances)
+        self._single = None             # _Single, made on the first single-precision solve
+        self.float32_pairs = None       # its pairs in float32 too (the stiffness's range, _Single)
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
+        self.single_iterations = 0      # ... of them with a float32 basis (single.py)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
         self._A = self._b = self._y = None
@@ -82,9 +152,15 @@ class SubsetStep:
         ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
 
-    def set_tolerances(self, rtol, atol, max_it):
-        """``max_it`` counts Krylov iterations; nested (``cycle`` > 1), whole cycles of the outer KSP."""
+    def set_tolerances(self, rtol, atol, max_it, single=False):
+        """``max_it`` counts Krylov iterations; nested (``cycle`` > 1), whole cycles of the outer KSP.
+        ``single``: solve in single precision (single.py) with these tolerances instead of the KSP."""
         self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=-(-max_it // self.cycle))
+        # not when the user chose the Krylov method (-ksp_type / -contact_ksp_type): theirs runs
+        self.single = bool(single) and self._prefix + "ksp_type" in self._own_keys
+        self._tolerances = (rtol, atol, max_it)
+        if not self.single and self._single is not None:
+            self._single.free()           # the KSP's own basis takes the memory budget now
 
     def setUp(self, pc):
         pass
@@ -93,6 +169,8 @@ class SubsetStep:
         """Make S the local points ``idx`` (flat, sorted), ``n_S`` points on all ranks (> 0)."""
         PETSc = self.PETSc
         self.buf.reshape(-1)[self.idx] = 0.0
+        if self._single is not None:
+            self._single.clear(self.idx)
         n_loc = int(idx.size)
         self.idx = idx
         self.n_S = int(n_S)
@@ -140,10 +218,56 @@ class SubsetStep:
 
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
-        self._y.set(0.0)
-        self.ksp.solve(self._b, self._y)
-        self.iterations += self.cycle * self.ksp.getIterationNumber()
+        if self.single:
+            self._solve_single()
+        else:
+            self._y.set(0.0)
+            self.ksp.solve(self._b, self._y)
+            self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
+
+    def _solve_single(self):
+        if self._single is None:
+            self.float32_pairs = self.stiffness_range() <= self.settings.single_range_max
+            self._single = _Single(self, self.float32_pairs)
+        sg = self._single
+        n_loc = int(self.idx.size)
+        rtol, atol, max_it = self._tolerances
+        b, y = self._b.getArray(readonly=True), self._y.getArray()
+        allsum = self.fft._allsum
+        k = self.cycle
+        # float64 vectors' worth of memory an iteration: a float32 basis vector, and with FGMRES the
+        # preconditioned one in the work precision
+        flexible = (4 + np.dtype(sg.work).itemsize) / 8
+        if k == 1:
+            vectors = flexible if self.mode == "contact" else 0.5
+            restart = self.comm.allreduce(self.settings.single_restart(n_loc, self.mode, vectors), op=MPI.MIN)
+            if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
+                restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
+            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.mode == "contact")
+            its, _ = gm.solve(sg.A.matvec, sg.B.matvec, b, y, rtol, atol, max_it)
+        else:   # cycles (freeset.start_cycles): FGMRES over exactly k GMRES iterations, as the KSP does
+            inner = sg.gmres("inner", n_loc, k, allsum, flexible=False)
+            restart = self.comm.allreduce(self.settings.single_restart(n_loc, "free", flexible, reserve=k + 3),
+                                          op=MPI.MIN)
+            outer = sg.gmres("outer", n_loc, min(restart, -(-max_it // k)), allsum, flexible=True)
+
+            def cycle(v, out):
+                inner.solve(sg.A.matvec, sg.B.matvec, v, out, 0.0, 0.0, k)
+
+            its, _ = outer.solve(sg.A.matvec, cycle, b, y, rtol, atol, -(-max_it // k))
+            its *= k
+        self.iterations += its
+        self.single_iterations += its
+
+    def stiffness_range(self):
+        """max |m_q| / min |m_q| over the grid's q != 0 (all ranks): how far float32 rounding of a gap
+        is amplified by the stiffness (single.py)."""
+        a = np.abs(self.op.m)
+        nz = a[a > 0]
+        hi = self.comm.allreduce(float(nz.max()) if nz.size else 0.0, op=MPI.MAX)
+        lo = self.comm.allreduce(float(nz.min()) if nz.size else math.inf, op=MPI.MIN)
+        return hi / lo if hi > 0 else 1.0
 
     def release(self):
         """Destroy the inner KSP and its operators; remove the option defaults this step put in."""
@@ -158,3 +282,4 @@ class SubsetStep:
             except Exception:
                 pass
         self._own_keys = []
+        self._single = None

@@ -1,0 +1,178 @@
+"""Single-precision Newton steps (vecontact/solver/single.py, changing_precision).
+
+* SingleGMRES against a dense solve and against PETSc's KSPGMRES (right preconditioning, the same
+  restart): the same stopping test, so the same iteration counts up to float32 rounding of the
+  residual estimate, and a true residual that meets the tolerance;
+* the solver with single-precision changing steps against double precision on paper surfaces at
+  10 m/s (free-set and contact-set steps): the same answer to the solver's tolerance, and the float32
+  pairs really ran (and only while the policy allows them).
+"""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from reference.cases import L_PAPER, NU, Q0
+
+from vecontact.core.pfft import SlabFFT
+from vecontact.core.surface import generate
+from vecontact.physics.modulus import HavriliakNegami
+from vecontact.physics.spectrum import SelfAffine
+from vecontact.solver import solve_contact
+from vecontact.solver.single import SingleGMRES
+
+
+def _allsum(values):
+    return np.asarray(values, dtype=np.float64).copy()
+
+
+def _system(n=240, seed=3):
+    """A non-symmetric operator with a spread spectrum (GMRES needs tens of iterations) and an
+    approximate inverse as preconditioner, like the steps' stiffness / compliance pair."""
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    lam = np.logspace(0, 2, n)
+    A = (Q * lam) @ Q.T + 3.0 * rng.standard_normal((n, n)) / np.sqrt(n)
+    Binv = (Q * lam) @ Q.T
+    B = np.linalg.inv(Binv + 0.3 * np.eye(n) * lam.mean())
+    b = rng.standard_normal(n)
+    return A, B, b
+
+
+def _ops(A, B):
+    def apply(M):
+        return lambda u, out: np.copyto(out, M @ u, casting="same_kind")
+    return apply(A), apply(B)
+
+
+@pytest.mark.parametrize("restart, work", [(200, np.float32), (15, np.float32), (15, np.float64)])
+def test_single_gmres_against_dense(restart, work):
+    A, B, b = _system()
+    opA, opB = _ops(A, B)
+    x = np.empty_like(b)
+    gm = SingleGMRES(b.size, restart, _allsum, work=work)
+    for rtol in (1e-2, 1e-4):
+        its, est = gm.solve(opA, opB, b, x, rtol, 0.0, 500)
+        true = np.linalg.norm(b - A @ x)
+        nb = np.linalg.norm(b)
+        # the estimate is the float64 Givens residual of a float32 Arnoldi process: it tracks the
+        # true residual to float32 rounding of the products (~1e-6 |b| here)
+        assert est <= rtol * nb and 1 < its < 500
+        assert true <= rtol * nb * 1.05 + 2e-6 * nb, (rtol, its, est, true)
+        assert abs(true - est) <= 2e-6 * nb + 0.05 * est
+    # a solution that really is the solve's: it approaches the dense one
+    xd = np.linalg.solve(A, b)
+    assert np.linalg.norm(x - xd) <= 1e-2 * np.linalg.norm(xd)
+
+
+def test_single_gmres_iterations_as_petsc():
+    """Same stopping rule as KSPGMRES with right preconditioning (PETSc's default test from x0 = 0)."""
+    from petsc4py import PETSc
+    A, B, b = _system(seed=5)
+    n = b.size
+    for restart, rtol in ((200, 1e-3), (12, 1e-3)):
+        gm = SingleGMRES(n, restart, _allsum)
+        x = np.empty_like(b)
+        its, _ = gm.solve(*_ops(A, B), b, x, rtol, 0.0, 1000)
+        mat = PETSc.Mat().createDense((n, n), array=A.copy(), comm=PETSc.COMM_SELF)
+        pmat = PETSc.Mat().createDense((n, n), array=B.copy(), comm=PETSc.COMM_SELF)
+        ksp = PETSc.KSP().create(comm=PETSc.COMM_SELF)
+        ksp.setOperators(mat)
+        ksp.setType("gmres")
+        ksp.setGMRESRestart(restart)
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        pc = ksp.getPC()
+        pc.setType("mat")
+        pc.setOperators(mat, pmat)
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=1000)
+        bv = PETSc.Vec().createWithArray(b.copy(), comm=PETSc.COMM_SELF)
+        xv = bv.duplicate()
+        ksp.solve(bv, xv)
+        assert ksp.getConvergedReason() > 0
+        assert abs(its - ksp.getIterationNumber()) <= 1, (restart, its, ksp.getIterationNumber())
+        assert np.linalg.norm(x - xv.getArray()) <= 10 * rtol * np.linalg.norm(xv.getArray())
+        for o in (ksp, mat, pmat, bv, xv):
+            o.destroy()
+
+
+def test_single_gmres_caps_and_trivial_cases():
+    A, B, b = _system()
+    opA, opB = _ops(A, B)
+    x = np.empty_like(b)
+    gm = SingleGMRES(b.size, 30, _allsum)
+    its, est = gm.solve(opA, opB, b, x, 1e-12, 0.0, 7)            # the cap
+    assert its == 7 and len(gm.history) == 8 and est == gm.history[-1] > 0
+    its, est = gm.solve(opA, opB, b, x, 0.5, 1e30, 50)            # atol met at once: still 1 (min_it)
+    assert its == 1 and np.all(np.isfinite(x)) and np.any(x != 0)
+    its, est = gm.solve(opA, opB, np.zeros_like(b), x, 0.1, 0.0, 50)
+    assert its == 0 and est == 0.0 and not np.any(x)
+
+
+def test_single_gmres_flexible_same_iterations():
+    """Keeping B v_k (flexible) changes where the solution is formed, not the iterations."""
+    A, B, b = _system(seed=7)
+    res = []
+    for flexible in (False, True):
+        x = np.empty_like(b)
+        its, _ = SingleGMRES(b.size, 20, _allsum, flexible=flexible, work=np.float64).solve(
+            *_ops(A, B), b, x, 1e-4, 0.0, 300)
+        res.append((its, x))
+    assert res[0][0] == res[1][0]
+    assert np.linalg.norm(res[0][1] - res[1][1]) <= 1e-4 * np.linalg.norm(res[0][1])
+
+
+def _solve(N, v, sigma0, options):
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
+    h = generate(fft, L_PAPER, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), 1)
+    hn = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    t0 = fft.single_transforms
+    r = solve_contact(fft, L_PAPER, h, hn, v, sigma0, tolerance=1e-8, store=("pressure",), petsc_options=options)
+    return r, fft.gather(r.pressure > 0), (fft.single_transforms - t0) / 2
+
+
+@pytest.mark.parametrize("sigma0, mode, range_max", [(1.0e6, "free", 1e30), (1.0e5, "contact", 1e30),
+                                                     (1.0e6, "free", 1.0), (1.0e5, "contact", 1.0)])
+def test_single_steps_same_solution(sigma0, mode, range_max):
+    """float32 basis with float32 pairs (range_max above the stiffness's range, 4e3 here) and with
+    float64 pairs (range_max 1)."""
+    one, act1, pairs1 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "single",
+                                                   "vc_single_range_max": str(range_max)})
+    two, act2, pairs2 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "double"})
+    assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
+    assert one.diagnostics["step_modes"][-1][1] == mode
+    d1, d2 = one.diagnostics, two.diagnostics
+    assert d1["single_iterations"] > 0.3 * one.linear_iterations and d2["single_iterations"] == 0
+    assert d1["float32_pairs"] == (range_max > 1) and not d2["float32_pairs"]
+    assert (pairs1 > 0.3 * one.fft_pairs) if range_max > 1 else pairs1 == 0
+    assert pairs2 == 0
+    differ = int(np.count_nonzero(act1 != act2))      # points on the contact line may fall either way
+    assert differ <= 4, differ
+    assert abs(one.area - two.area) <= differ / 256 ** 2
+    assert abs(one.mu / two.mu - 1) <= 1e-6, (one.mu, two.mu)
+    # float32 changes only the rounding of the loose steps: the same number of Newton steps, give or take one
+    assert abs(one.iterations - two.iterations) <= 1
+
+
+def test_single_steps_only_where_allowed():
+    # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol:
+    # no float32
+    for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2"}, {"vc_single_rtol_min": "0.5"},
+                    {"ksp_type": "gmres", "contact_ksp_type": "fgmres"}):
+        r, _, pairs = _solve(128, 10.0, 1.0e6, options)
+        assert r.converged and pairs == 0, options
+
+
+def test_single_gmres_dots_sum_in_double():
+    """The Gram-Schmidt products: float32 sums of at most 8192 terms, then float64 over the chunks.
+    Against float64 products, the error relative to |v_j| |t| stays at the chunk's float32 rounding
+    (~sqrt(8192) x 6e-8 / sqrt(n / 8192) here, measured 1.6e-9), where one float32 sum over all
+    2e6 terms (BLAS sgemv) errs by 8e-8."""
+    rng = np.random.default_rng(1)
+    n = 2_000_000
+    V = (rng.standard_normal((3, n)) + 0.5).astype(np.float32)
+    t = (rng.standard_normal(n) + 0.5).astype(np.float32)
+    gm = SingleGMRES(8, 2, _allsum)
+    ref = V.astype(np.float64) @ t.astype(np.float64)
+    scale = np.linalg.norm(V.astype(np.float64), axis=1) * np.linalg.norm(t.astype(np.float64))
+    assert np.max(np.abs(gm._dots(V, t) - ref) / scale) < 1e-8
+    assert np.max(np.abs(gm._dots(V[:, :12345], t[:12345]) - V[:, :12345].astype(float) @ t[:12345])
+                  / scale) < 1e-8                                     # a partial last chunk

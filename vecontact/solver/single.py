@@ -1,0 +1,148 @@
+"""Restarted GMRES with a single-precision Krylov basis, for the Newton steps whose active set still
+changes.
+
+A changing step only needs its Krylov residual cut by lin_rtol (0.1 .. 1e-3, policy.py), far above
+float32 rounding (6e-8); steps tightened below SolverSettings.single_rtol_min run in double.  Its two
+costs are memory-bound: the classical Gram-Schmidt over the basis, and the FFT pairs of the operator
+and of the preconditioner.  The basis is a float32 block streamed by BLAS sgemv: half the bytes.  The
+pairs can run in float32 too (SlabFFT.single(), about half the time) only while the stiffness's range
+of scales is small: a float32 pair rounds the preconditioned vector (a gap, dominated by long
+waves) to 6e-8 of its size, and the stiffness then amplifies that noise at short waves by up to
+max|m_q| / min|m_q| (SolverSettings.single_range_max); beyond it the pairs stay float64.
+PETSc cannot do either: its vectors have one precision per build.
+
+The method is PETSc's KSPGMRES (or, ``flexible``, KSPFGMRES) with right preconditioning, x0 = 0,
+classical Gram-Schmidt without refinement, and its default test (||r|| <= max(rtol ||b||, atol), at
+least ``min_it`` iterations), so the steps stop where PETSc's did.  The small Hessenberg problem and
+every global sum are float64 (the sums bitwise identical on all ranks, SlabFFT._allsum).  At a restart
+the residual is recomputed from the float64 right-hand side.  The solution is accumulated in float64.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["SingleGMRES"]
+
+# entries summed in float32 before the partial sums go on in float64 (_dots)
+_CHUNK = 8192
+
+
+class SingleGMRES:
+    """GMRES(restart) with a float32 Krylov basis on vectors of ``n_loc`` local entries.
+
+    ``allsum(values)``: the global sum of a float64 array, identical on all ranks.  ``solve`` takes the
+    operator and the preconditioner as callables ``A(z, out)`` and ``B(v, out)``: v (a basis vector)
+    and ``out`` of A are float32, z and ``out`` of B are of ``work`` dtype (float64 keeps the
+    preconditioned vectors, whose range of scales float32 cannot hold at large N and v, exact).
+    ``flexible``: keep the preconditioned vectors B v_k (FGMRES's memory), so that the solution needs
+    no further preconditioner apply (one FFT pair a solve less, as PETSc's FGMRES against its GMRES).
+    ``basis`` and ``work``: memory to work in (float32 and ``work`` dtype, of ``sizes()`` entries),
+    e.g. kept between solves.
+    """
+
+    def __init__(self, n_loc, restart, allsum, flexible=False, work=np.float32, basis_store=None,
+                 work_store=None):
+        self.n_loc = n = int(n_loc)
+        self.restart = m = int(restart)
+        self.allsum = allsum
+        self.flexible = bool(flexible)
+        nb, nw = self.sizes(n, m, flexible)
+        basis_store = np.empty(nb, dtype=np.float32) if basis_store is None else basis_store
+        work_store = np.empty(nw, dtype=work) if work_store is None else work_store
+        self.V = basis_store[:(m + 1) * n].reshape(m + 1, n)
+        self.t = basis_store[(m + 1) * n:(m + 2) * n]
+        self.u = basis_store[(m + 2) * n:(m + 3) * n]
+        self.z = work_store[:n]
+        self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
+        self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
+
+    @staticmethod
+    def sizes(n_loc, restart, flexible):
+        """Entries of the float32 basis memory and of the work memory."""
+        return (restart + 3) * int(n_loc), (restart + 1 if flexible else 1) * int(n_loc)
+
+    def _dots(self, M, v):
+        """M @ v (float32), summed in float32 over chunks of _CHUNK entries and in float64 over the
+        chunks.  One long float32 sum (BLAS sgemv) errs by ~sqrt(n) x 6e-8: enough, at n ~ 1e6, to
+        spoil the orthogonality of the basis and the steps (RESULTS.md)."""
+        n = v.size
+        c = n // _CHUNK
+        out = np.zeros(M.shape[0])
+        if c:
+            Mc = M[:, :c * _CHUNK].reshape(M.shape[0], c, _CHUNK).transpose(1, 0, 2)
+            vc = v[:c * _CHUNK].reshape(c, _CHUNK, 1)
+            out += np.matmul(Mc, vc)[:, :, 0].sum(axis=0, dtype=np.float64)
+        if n > c * _CHUNK:
+            out += M[:, c * _CHUNK:] @ v[c * _CHUNK:]
+        return out
+
+    def _norm(self, v):
+        return math.sqrt(float(self.allsum(self._dots(v.reshape(1, -1), v))[0]))
+
+    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1):
+        """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
+        (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
+        estimate)."""
+        V, z, t, u = self.V, self.z, self.t, self.u
+        x[...] = 0.0
+        r = b
+        its = 0
+        bnorm = math.sqrt(float(self.allsum([float(np.dot(b, b))])[0]))
+        self.history = [bnorm]
+        target = max(rtol * bnorm, atol)
+        res = bnorm
+        if bnorm == 0.0:
+            return 0, 0.0
+        while True:
+            beta = self._norm(r) if its else bnorm
+            np.multiply(r, 1.0 / beta, out=V[0], casting="same_kind")
+            m = self.restart
+            H = np.zeros((m + 1, m))
+            cs, sn = np.zeros(m), np.zeros(m)
+            g = np.zeros(m + 1)
+            g[0] = beta
+            k = 0
+            while k < m:
+                zk = self.Z[k] if self.flexible else z
+                B(V[k], zk)
+                A(zk, t)
+                h = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
+                np.dot(h.astype(np.float32), V[:k + 1], out=u)
+                t -= u
+                hn = self._norm(t)
+                H[:k + 1, k] = h
+                H[k + 1, k] = hn
+                for i in range(k):                         # earlier Givens rotations
+                    a0, a1 = H[i, k], H[i + 1, k]
+                    H[i, k], H[i + 1, k] = cs[i] * a0 + sn[i] * a1, -sn[i] * a0 + cs[i] * a1
+                d = math.hypot(H[k, k], H[k + 1, k])
+                cs[k], sn[k] = (H[k, k] / d, H[k + 1, k] / d) if d > 0 else (1.0, 0.0)
+                H[k, k], H[k + 1, k] = d, 0.0
+                g[k + 1] = -sn[k] * g[k]
+                g[k] = cs[k] * g[k]
+                res = abs(g[k + 1])
+                k += 1
+                its += 1
+                self.history.append(res)
+                done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
+                if done:
+                    break
+                np.multiply(t, 1.0 / hn, out=V[k])
+            # x += B (V_k y),  H_k y = g_k (upper triangular after the rotations)
+            y = np.zeros(k)
+            for i in range(k - 1, -1, -1):
+                y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
+            if self.flexible:
+                np.dot(y.astype(z.dtype), self.Z[:k], out=z)
+            else:
+                np.dot(y.astype(np.float32), V[:k], out=t)
+                B(t, z)
+            x += z
+            if done:
+                return its, res
+            # restart: the residual of the float64 right-hand side
+            np.copyto(z, x, casting="same_kind")
+            A(z, t)
+            r = b - t
