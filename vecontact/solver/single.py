@@ -1,11 +1,12 @@
 """Restarted GMRES with a single-precision Krylov basis, for the Newton steps whose active set still
 changes.
 
-A changing step only needs its Krylov residual cut by lin_rtol (0.1 .. 1e-3, policy.py), far above
-float32 rounding (6e-8); steps tightened below SolverSettings.single_rtol_min run in double.  Its two
-costs are memory-bound: the classical Gram-Schmidt over the basis, and the FFT pairs of the operator
-and of the preconditioner.  The basis is a float32 block streamed by BLAS sgemv: half the bytes.  The
-pairs can run in float32 too (SlabFFT.single(), about half the time) only while the stiffness's range
+A changing step only needs its Krylov residual cut by lin_rtol (policy.py), far above float32
+rounding (6e-8); steps tightened below SolverSettings.single_rtol_min (1e-2) run in double, where a
+float32 basis left the next iterate less accurate.  The step's two costs are memory-bound: the
+classical Gram-Schmidt over the basis, and the FFT pairs of the operator and of the preconditioner.
+The basis is a float32 block streamed by BLAS sgemv: half the bytes (its products summed in float64
+over chunks, _dots).  The pairs can run in float32 too (SlabFFT.single(), about half the time) only while the stiffness's range
 of scales is small: a float32 pair rounds the preconditioned vector (a gap, dominated by long
 waves) to 6e-8 of its size, and the stiffness then amplifies that noise at short waves by up to
 max|m_q| / min|m_q| (SolverSettings.single_range_max); beyond it the pairs stay float64.
