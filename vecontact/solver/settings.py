@@ -125,15 +125,14 @@ class SolverSettings:
                              self.restart_min)
 
     def single_restart(self, n_local, mode, vectors, reserve=0):
-        """Restart of a single-precision step solve (single.py) on the free set (mode "free":
-        restart_max, restart_memory) or the contact set ("contact": the inner_ ones); ``vectors``:
-        float64 vectors' worth of memory an iteration (0.5 for a float32 basis vector); ``reserve``:
-        float32 vectors of the budget held elsewhere (the inner GMRES of cycles)."""
+        """Restart of a single-precision step solve (single.py) on the free set (mode "free": as
+        ``restart``) or the contact set ("contact": the inner_ budget); ``vectors``: float64 vectors'
+        worth of memory an iteration (0.5 for a float32 basis vector); ``reserve``: float32 vectors of
+        the budget held elsewhere (the inner GMRES of cycles)."""
         if mode == "contact":
             return gmres_restart(n_local, self.inner_restart_memory, vectors, self.inner_restart_max,
                                  self.restart_min)
-        return gmres_restart(n_local, self.restart_memory - 4.0 * reserve * n_local, vectors, self.restart_max,
-                             self.restart_min)
+        return self.restart(n_local, vectors, reserve / 2)
 
     def inner_restart(self, n_local):
         """FGMRES restart of the inner solve of the contact-set steps (n_local: local contact points)."""

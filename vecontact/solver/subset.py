@@ -80,7 +80,6 @@ class _Single:
             m_A, m_B = A.multiplier, B.multiplier
         self.A = Restricted(step, m_A, A.post, grid=self)
         self.B = Restricted(step, m_B, B.post, grid=self)
-        self._float32 = float32_pairs
         self._stores = {}
 
     def free(self):
@@ -89,7 +88,7 @@ class _Single:
 
     def clear(self, idx):
         """Zero the float32 grid buffer at ``idx`` (the step's own is cleared by select)."""
-        if self._float32:
+        if self.work == np.float32:
             self.buf.reshape(-1)[idx] = 0.0
 
     def gathered(self, n):
