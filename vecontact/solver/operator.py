@@ -100,6 +100,7 @@ class ContactOperator:
         self.k = fft.sum(np.array([loc])) / float(N) ** 2
         self.kappa = self.k * self.ell / self.sigma0
         self.m = M * (self.ell / self.sigma0)
+        self._stiffness_bounds = None
         with np.errstate(divide="ignore", invalid="ignore"):
             c = np.where(absM > 0, 1.0 / np.where(absM > 0, self.m, 1.0), 0.0)
         self.c = np.ascontiguousarray(c)
@@ -118,6 +119,16 @@ class ContactOperator:
         if self.N % 2 == 0:
             m[self.N // 2] = 0.0
         return self.fft.backward(self.h_fourier * m)
+
+    def stiffness_bounds(self):
+        """(min, max) of |m_q| over the grid's q != 0, all ranks (collective on the first call)."""
+        if self._stiffness_bounds is None:
+            a = np.abs(self.m)
+            nz = a[a > 0]
+            hi = self.fft.comm.allreduce(float(nz.max()) if nz.size else 0.0, op=MPI.MAX)
+            lo = self.fft.comm.allreduce(float(nz.min()) if nz.size else np.inf, op=MPI.MIN)
+            self._stiffness_bounds = (lo, hi)
+        return self._stiffness_bounds
 
     # ------------------------------------------------------------------ nondimensional maps
     def pressure(self, ghat, out=None):

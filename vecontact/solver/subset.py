@@ -8,8 +8,6 @@ basis vector, and the GMRES restart that fits the memory budget grows by N^2 / |
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from mpi4py import MPI
 
@@ -237,9 +235,9 @@ class SubsetStep:
         k = self.cycle
         # float64 vectors' worth of memory an iteration: a float32 basis vector, and with FGMRES the
         # preconditioned one in the work precision
-        flexible = (4 + np.dtype(sg.work).itemsize) / 8
+        fgmres_vectors = (4 + np.dtype(sg.work).itemsize) / 8
         if k == 1:
-            vectors = flexible if self.mode == "contact" else 0.5
+            vectors = fgmres_vectors if self.mode == "contact" else 0.5
             restart = self.comm.allreduce(self.settings.single_restart(n_loc, self.mode, vectors), op=MPI.MIN)
             if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
@@ -247,8 +245,8 @@ class SubsetStep:
             its, _ = gm.solve(sg.A.matvec, sg.B.matvec, b, y, rtol, atol, max_it)
         else:   # cycles (freeset.start_cycles): FGMRES over exactly k GMRES iterations, as the KSP does
             inner = sg.gmres("inner", n_loc, k, allsum, flexible=False)
-            restart = self.comm.allreduce(self.settings.single_restart(n_loc, "free", flexible, reserve=k + 3),
-                                          op=MPI.MIN)
+            restart = self.settings.single_restart(n_loc, "free", fgmres_vectors, reserve=k + 3)
+            restart = self.comm.allreduce(restart, op=MPI.MIN)
             outer = sg.gmres("outer", n_loc, min(restart, -(-max_it // k)), allsum, flexible=True)
 
             def cycle(v, out):
@@ -260,12 +258,9 @@ class SubsetStep:
         self.single_iterations += its
 
     def stiffness_range(self):
-        """max |m_q| / min |m_q| over the grid's q != 0 (all ranks): how far float32 rounding of a gap
-        is amplified by the stiffness (single.py)."""
-        a = np.abs(self.op.m)
-        nz = a[a > 0]
-        hi = self.comm.allreduce(float(nz.max()) if nz.size else 0.0, op=MPI.MAX)
-        lo = self.comm.allreduce(float(nz.min()) if nz.size else math.inf, op=MPI.MIN)
+        """max |m_q| / min |m_q| over the grid's q != 0: how far float32 rounding of a gap is amplified
+        by the stiffness (single.py)."""
+        lo, hi = self.op.stiffness_bounds()
         return hi / lo if hi > 0 else 1.0
 
     def release(self):

@@ -184,8 +184,7 @@ def smooth_gap(op, ghat, sweeps, omega):
     fft = op.fft
     if sweeps <= 0:
         return ghat
-    mloc = float(np.abs(op.m).max()) if op.m.size else 0.0
-    mmax = fft.comm.allreduce(mloc, op=MPI.MAX)
+    mmax = op.stiffness_bounds()[1]
     if not mmax > 0:
         return ghat
     g = np.array(ghat, dtype=float, copy=True)
