@@ -5,7 +5,8 @@
   residual estimate, and a true residual that meets the tolerance;
 * the solver with single-precision changing steps against double precision on paper surfaces at
   10 m/s (free-set and contact-set steps): the same answer to the solver's tolerance, and the float32
-  pairs really ran (and only while the policy allows them).
+  pairs really ran (and only while the policy allows them);
+* the float32 GMRES cycles under PETSc's FGMRES (cycle_precision) against PETSc's own cycles.
 """
 import numpy as np
 import pytest
@@ -136,7 +137,7 @@ def test_single_steps_same_solution(sigma0, mode, range_max):
     float64 pairs (range_max 1)."""
     one, act1, pairs1 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "single",
                                                    "vc_single_range_max": str(range_max)})
-    two, act2, pairs2 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "double"})
+    two, act2, pairs2 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "double", "vc_cycle_precision": "double"})
     assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
     assert one.diagnostics["step_modes"][-1][1] == mode
     d1, d2 = one.diagnostics, two.diagnostics
@@ -152,10 +153,33 @@ def test_single_steps_same_solution(sigma0, mode, range_max):
     assert abs(one.iterations - two.iterations) <= 1
 
 
+def test_single_cycles_same_solution():
+    """cycle_precision single: once the free-set steps cycle (changing steps capped at 10 iterations:
+    the first uses its cap, the cycles start), the steps PETSc solves run its float64 FGMRES over GMRES
+    cycles with a float32 basis (subset.SingleCycles) instead of PETSc's float64 cycles.  Both cycles
+    are unpreconditioned GMRES with the same restart, so the steps take the same iterations up to
+    rounding (one cycle each), and the answer is the same to the solver's tolerance."""
+    base = {"vc_changing_precision": "double", "vc_cycle_after_cap": "1", "vc_lin_maxit_changing": "10"}
+    one, act1, pairs1 = _solve(256, 10.0, 1.0e6, dict(base, vc_cycle_precision="single"))
+    two, act2, pairs2 = _solve(256, 10.0, 1.0e6, dict(base, vc_cycle_precision="double"))
+    assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
+    d1, d2 = one.diagnostics, two.diagnostics
+    assert d1["step_modes"][-1][1] == "free"
+    # float32 only in the cycles (changing_precision double), and they did most of the work
+    assert d1["single_iterations"] > 0.5 * one.linear_iterations and d2["single_iterations"] == 0
+    assert pairs1 > 0.3 * one.fft_pairs and pairs2 == 0
+    h1, h2 = np.diff(d1["linear_history"]), np.diff(d2["linear_history"])
+    assert len(h1) == len(h2) and np.all(np.abs(h1 - h2) <= 20), (h1, h2)
+    differ = int(np.count_nonzero(act1 != act2))
+    assert differ <= 4, differ
+    assert abs(one.mu / two.mu - 1) <= 1e-6, (one.mu, two.mu)
+
+
 def test_single_steps_only_where_allowed():
     # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol:
     # no float32
-    for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2"}, {"vc_single_rtol_min": "0.5"},
+    for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2"},
+                    {"vc_single_rtol_min": "0.5", "vc_cycle_precision": "double"},
                     {"ksp_type": "gmres", "contact_ksp_type": "fgmres"}):
         r, _, pairs = _solve(128, 10.0, 1.0e6, options)
         assert r.converged and pairs == 0, options

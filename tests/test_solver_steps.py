@@ -51,16 +51,18 @@ def _jacobian(op, act, x):
 
 
 @pytest.mark.parametrize("area", [0.1, 0.6])
-@pytest.mark.parametrize("kind, cycle", [(ContactSetStep, 0), (FreeSetStep, 0), (FreeSetStep, 5)])
-def test_step_solves_the_newton_system(kind, cycle, area):
+@pytest.mark.parametrize("kind, cycle, precision", [(ContactSetStep, 0, "double"), (FreeSetStep, 0, "double"),
+                                                     (FreeSetStep, 5, "double"), (FreeSetStep, 5, "single")])
+def test_step_solves_the_newton_system(kind, cycle, precision, area):
     """Inner rtol 1e-13 on a 32^2 grid: |J x - r| <= 1e-9 max|r| leaves room for the FFT's rounding
     (m / kappa amplifies it by at most max|m| / kappa < 1e3, asserted) and nothing for a wrong
     elimination: dropping the contact step's rigid shift or the free step's coupling term m P_C r_C
     (both tried) fails by O(1).  ``cycle``: the free set solved by FGMRES over GMRES(5) cycles
-    (free_cycle), whose iterations come in whole cycles."""
+    (free_cycle), whose iterations come in whole cycles; ``precision`` single: the cycles with a float32
+    basis (SingleCycles) under the float64 FGMRES, which still meets the tight tolerance."""
     op = _operator()
     act = op.hhat > np.quantile(op.hhat, 1.0 - area)       # the highest points are in contact
-    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=cycle))
+    step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=cycle, cycle_precision=precision))
     try:
         if cycle:
             step.set_active(act, int(np.count_nonzero(act)))
@@ -77,22 +79,29 @@ def test_step_solves_the_newton_system(kind, cycle, area):
         step.release()
 
 
-def test_cycled_free_set_step_counts_and_caps_inner_iterations():
+@pytest.mark.parametrize("precision", ["single", "double"])
+def test_cycled_free_set_step_counts_and_caps_inner_iterations(precision):
     """free_cycle 5, cycling: the cap counts GMRES iterations, rounded up to whole cycles (12 -> 3 cycles, 15
     iterations), and every cycle runs all its 5 (an rtol the solve cannot meet makes it use the cap);
-    the FFT pairs show it: 1 for the step, then per cycle 5 x 2 (operator and PC) + 1 (the inner
-    solution's PC) + 1 (the outer FGMRES's operator)."""
+    the FFT pairs show it: 1 for the step, then per cycle 5 (the operator: the cycles' GMRES is
+    unpreconditioned) + 1 (the outer FGMRES's operator).  The same after the free set changed size
+    (select remakes the KSP's operators: PETSc's nested PC must not fall back to another one), and in
+    both precisions of the cycles (cycle_precision; single: every cycle iteration in float32)."""
     op = _operator()
-    act = op.hhat > np.quantile(op.hhat, 0.4)
-    step = FreeSetStep(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=5))
+    step = FreeSetStep(op, op.kappa, petsc(), "steptest_", SolverSettings(free_cycle=5, cycle_precision=precision))
     try:
-        step.set_active(act, int(np.count_nonzero(act)))
-        step.start_cycles()                                 # the policy's call once a step used its cap
-        step.set_tolerances(1e-30, 0.0, 12)
-        op.fft.reset_counters()
-        _apply_step(step, act, np.random.default_rng(7).standard_normal((N, N)))
-        assert step.iterations == 15 and step.solves == 1
-        assert op.fft.pairs == 1 + 3 * (5 * 2 + 1 + 1)
+        for q in (0.4, 0.5):                                # the second set: another size
+            act = op.hhat > np.quantile(op.hhat, q)
+            step.set_active(act, int(np.count_nonzero(act)))
+            step.start_cycles()                             # the policy's call once a step used its cap
+            step.set_tolerances(1e-30, 0.0, 12)
+            op.fft.reset_counters()
+            it0, s0 = step.iterations, step.single_iterations
+            _apply_step(step, act, np.random.default_rng(7).standard_normal((N, N)))
+            assert step.iterations - it0 == 15
+            assert step.single_iterations - s0 == (15 if precision == "single" else 0)
+            assert op.fft.pairs == 1 + 3 * (5 + 1)
+        assert step.solves == 2
     finally:
         step.release()
 

@@ -191,11 +191,19 @@ def test_measure_stop_follows_the_step_vectors_collective(comm):
         x.destroy()
 
 
-@pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.0e5, "contact")])
-def test_single_steps_collective(comm, sigma0, mode):
-    """Single-precision changing steps (single.py) on 2 ranks: their float32 pairs run on every rank
-    alike (the GMRES sums are float64 and identical on all ranks, so every rank stops at the same
-    iteration), and the answer is one rank's in double precision to the solver's tolerance."""
+_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double"}
+_CYCLES = {"vc_changing_precision": "double", "vc_cycle_precision": "single", "vc_cycle_after_cap": "1",
+           "vc_lin_maxit_changing": "10"}       # the first step uses its cap: cycles from the second on
+
+
+@pytest.mark.parametrize("sigma0, mode, options", [(1.0e6, "free", {"vc_changing_precision": "single"}),
+                                                   (1.0e5, "contact", {"vc_changing_precision": "single"}),
+                                                   (1.0e6, "free", _CYCLES)])
+def test_single_steps_collective(comm, sigma0, mode, options):
+    """Single-precision changing steps (single.py), and float32 GMRES cycles under PETSc's FGMRES
+    (subset.SingleCycles), on 2 ranks: their float32 pairs run on every rank alike (the GMRES sums are
+    float64 and identical on all ranks, so every rank stops at the same iteration), and the answer is
+    one rank's in double precision to the solver's tolerance."""
     from vecontact.core.pfft import SlabFFT
     from vecontact.core.surface import generate
     from vecontact.physics.spectrum import SelfAffine
@@ -203,12 +211,11 @@ def test_single_steps_collective(comm, sigma0, mode):
     N, tol = 256, 1e-8
     psd = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
     out = []
-    for c, precision in ((comm, "single"), (comm.Split(comm.rank, 0), "double")):
+    for c, opts in ((comm, options), (comm.Split(comm.rank, 0), _DOUBLE)):
         fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
         h = generate(fft, L_PAPER, psd, 1)
         t0 = fft.single_transforms
-        r = solve_contact(fft, L_PAPER, h, hn(), 10.0, sigma0, tolerance=tol, store=(),
-                          petsc_options={"vc_changing_precision": precision})
+        r = solve_contact(fft, L_PAPER, h, hn(), 10.0, sigma0, tolerance=tol, store=(), petsc_options=opts)
         out.append((r, (fft.single_transforms - t0) / 2))
     (res, single), (one, none) = out
     same_on_all_ranks(comm, res)

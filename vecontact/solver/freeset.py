@@ -24,9 +24,11 @@ steps"), and the restart that fits the memory budget grows by N^2 / |F|.  The in
 restart SolverSettings.restart of the first free set's size.
 
 Long solves (fast sliding at large A/A0) switch to cycles (``start_cycles``, when StepPolicy.cycling
-says so): FGMRES preconditioned by exactly SolverSettings.free_cycle iterations of the same GMRES
-(PETSc's PCKSP, inner options ``-ksp_ksp_*``).  The outer basis stays short, which cuts the
-orthogonalisation that makes up half of such a solve (benchmarks/RESULTS.md, "free_cycle").
+says so): FGMRES preconditioned by exactly SolverSettings.free_cycle iterations of unpreconditioned
+GMRES on A (one FFT pair an iteration).  The outer basis stays short, which cuts the
+orthogonalisation that makes up half of such a solve (benchmarks/RESULTS.md, "free_cycle").  The
+cycles run with a float32 basis under PETSc's float64 FGMRES (subset.SingleCycles,
+SolverSettings.cycle_precision single), or as PETSc's PCKSP (double; inner options ``-ksp_ksp_*``).
 """
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.settings import PETSC_FREE_CYCLE_DEFAULTS, PETSC_FREE_DEFAULTS
-from vecontact.solver.subset import Restricted, SubsetStep
+from vecontact.solver.subset import Restricted, SingleCycles, SubsetStep
 
 __all__ = ["FreeSetStep"]
 
@@ -62,10 +64,17 @@ class FreeSetStep(SubsetStep):
 
     def start_cycles(self):
         """From the next solve on, FGMRES over cycles of free_cycle GMRES iterations (StepPolicy.cycling):
-        a short outer basis, so little orthogonalisation an iteration.  Nothing when free_cycle is 0,
+        a short outer basis, so little orthogonalisation an iteration; the cycles in float32
+        (SingleCycles) or, cycle_precision double, in PETSc.  Nothing when free_cycle is 0,
         when it already runs so, or when the user chose the inner KSP's type (-ksp_type).  Collective."""
         k = self.settings.free_cycle
         if k == 0 or self.cycle > 1 or self._prefix + "ksp_type" not in self._own_keys:
+            return
+        if self.settings.cycle_precision == "single":   # the cycles with a float32 basis (subset.py)
+            restart = self.settings.single_restart(self.idx.size, "free", 2, reserve=k + 3)
+            restart = self.comm.allreduce(restart, op=MPI.MIN)
+            self.configure(dict(PETSC_FREE_DEFAULTS, ksp_type="fgmres", ksp_gmres_restart=str(restart)),
+                           SingleCycles(self, k))
             return
         restart = self.settings.restart(self.idx.size, vectors=2, reserve=k + 1)
         restart = self.comm.allreduce(restart, op=MPI.MIN)

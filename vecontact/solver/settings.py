@@ -84,6 +84,9 @@ class SolverSettings:
                                    "basis falls short) [RESULTS.md]", lo=0, hi=1, lo_open=True)
     single_range_max: float = _knob(1.5e5, "... with float32 FFT pairs too while max|m_q|/min|m_q| <= this, else "
                                     "float64 pairs and a float32 basis [RESULTS.md]", lo=0)
+    cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
+                                 "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
+                                 choices=("single", "double"))
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)
@@ -214,11 +217,13 @@ PETSC_INNER_DEFAULTS = {"ksp_type": "fgmres", "ksp_min_it": "1"}
 # so right-preconditioned GMRES does what FGMRES does with half the basis; ksp_gmres_restart from
 # restart() of the free set's size [RESULTS.md]
 PETSC_FREE_DEFAULTS = {"ksp_type": "gmres", "ksp_pc_side": "right", "ksp_min_it": "1"}
-# the same with free_cycle k > 0: FGMRES whose PC (PCKSP, inner prefix <solver>ksp_) runs exactly k
-# right-preconditioned GMRES iterations; the outer basis is short, so the orthogonalisation is cheap
-# [RESULTS.md]; ksp_gmres_restart from restart(), ksp_ksp_max_it and ksp_ksp_gmres_restart = k
+# the same with free_cycle k > 0 and cycle_precision double: FGMRES whose PC (PCKSP, inner prefix
+# <solver>ksp_) runs exactly k unpreconditioned GMRES iterations (pc_type none: explicit, as PETSc
+# remade the inner KSP with it whenever the free set changed size); the outer basis is short, so the
+# orthogonalisation is cheap [RESULTS.md]; ksp_gmres_restart from restart(), ksp_ksp_max_it and
+# ksp_ksp_gmres_restart = k
 PETSC_FREE_CYCLE_DEFAULTS = dict(PETSC_FREE_DEFAULTS, ksp_type="fgmres", pc_type="ksp", ksp_ksp_type="gmres",
                                  ksp_ksp_pc_side="right", ksp_ksp_rtol="1e-30", ksp_ksp_atol="0",
-                                 ksp_ksp_min_it="0")
+                                 ksp_ksp_min_it="0", ksp_ksp_pc_type="none")
 # global (unprefixed): PETSc's own VecMDot/VecMAXPY kernels, not the reference BLAS's dgemv [RESULTS.md]
 PETSC_GLOBAL_DEFAULTS = {"vec_mdot_use_gemv": "0", "vec_maxpy_use_gemv": "0"}

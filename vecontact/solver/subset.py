@@ -13,7 +13,7 @@ from mpi4py import MPI
 
 from vecontact.solver.single import SingleGMRES
 
-__all__ = ["Restricted", "SubsetStep"]
+__all__ = ["Restricted", "SingleCycles", "SubsetStep"]
 
 
 class Restricted:
@@ -105,6 +105,35 @@ class _Single:
         return SingleGMRES(n_loc, restart, allsum, flexible, self.work, stores[0][:need[0]], stores[1][:need[1]])
 
 
+def _identity(v, out):
+    np.copyto(out, v, casting="same_kind")
+
+
+class SingleCycles:
+    """Python PC of a step's inner FGMRES (PETSc, float64 basis): exactly ``cycle`` iterations of
+    unpreconditioned GMRES on the step's operator, with a float32 basis (single.py; its pairs as
+    _Single's).  A cycle cuts the residual by far less than float32 rounding limits, and the outer
+    FGMRES keeps its own float64 space across the cycles (its operator in float64), so steps solved to
+    any tolerance (exact ones too, with the measure stop on the outer KSP) keep a float32 basis where
+    the work is (SolverSettings.cycle_precision).  Unpreconditioned, as PETSc's cycles
+    (settings.PETSC_FREE_CYCLE_DEFAULTS): with the step's compliance PC the solves took 1.2-1.7x the
+    pairs [RESULTS.md]."""
+
+    def __init__(self, step, cycle):
+        self.step = step
+        self.cycle = int(cycle)
+
+    def setUp(self, pc):
+        pass
+
+    def apply(self, pc, x, y):
+        step = self.step
+        sg = step.single_context()
+        gm = sg.gmres("inner", int(step.idx.size), self.cycle, step.fft._allsum, flexible=False)
+        its, _ = gm.solve(sg.A.matvec, _identity, x.getArray(readonly=True), y.getArray(), 0.0, 0.0, self.cycle)
+        step.single_iterations += its
+
+
 class SubsetStep:
     """Base of the Newton-step PCs: the inner KSP on the points ``idx`` of S, its restricted operator,
     the option defaults it puts into PETSc's database (removed again by ``release``) and the count of
@@ -189,11 +218,13 @@ class SubsetStep:
             self.configure(self.defaults(n_loc))
             self._configured = True
 
-    def configure(self, defaults):
+    def configure(self, defaults, pc_context=None):
         """Put ``defaults`` into the options database under the inner prefix (where the user has not set
         the key; this step's own earlier defaults are replaced), then set the inner KSP from it.  A
-        ``-pc_type ksp`` there nests it (free_cycle): the Python PC goes to the inner KSP of PCKSP, and
-        ``cycle`` becomes that KSP's iteration count, which it always runs in full."""
+        ``-pc_type ksp`` there nests it (free_cycle; its inner KSP and PC from the ``-ksp_ksp_*``
+        options), and ``cycle`` becomes that KSP's iteration count, which it always runs in full.
+        ``pc_context``: the Python PC of the inner KSP instead of ``preconditioner()`` (its ``cycle``, if
+        it has one, counts)."""
         opts = self.PETSc.Options()
         for k, v in defaults.items():
             key = self._prefix + k
@@ -203,13 +234,11 @@ class SubsetStep:
                     self._own_keys.append(key)
         pc = self.ksp.getPC()
         pc.setType("python")
-        pc.setPythonContext(self.preconditioner())
+        pc.setPythonContext(self.preconditioner() if pc_context is None else pc_context)
         self.ksp.setFromOptions()
-        self.cycle = 1
+        self.cycle = getattr(pc_context, "cycle", 1)
         if pc.getType() == "ksp":
             inner = pc.getKSP()
-            inner.getPC().setType("python")
-            inner.getPC().setPythonContext(self.preconditioner())
             inner.setFromOptions()
             self.cycle = inner.getTolerances()[3]
 
@@ -223,11 +252,15 @@ class SubsetStep:
             self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
 
-    def _solve_single(self):
+    def single_context(self):
+        """The step's _Single (made on first use; its pairs in float32 by the stiffness's range)."""
         if self._single is None:
             self.float32_pairs = self.stiffness_range() <= self.settings.single_range_max
             self._single = _Single(self, self.float32_pairs)
-        sg = self._single
+        return self._single
+
+    def _solve_single(self):
+        sg = self.single_context()
         n_loc = int(self.idx.size)
         rtol, atol, max_it = self._tolerances
         b, y = self._b.getArray(readonly=True), self._y.getArray()
@@ -250,7 +283,7 @@ class SubsetStep:
             outer = sg.gmres("outer", n_loc, min(restart, -(-max_it // k)), allsum, flexible=True)
 
             def cycle(v, out):
-                inner.solve(sg.A.matvec, sg.B.matvec, v, out, 0.0, 0.0, k)
+                inner.solve(sg.A.matvec, _identity, v, out, 0.0, 0.0, k)
 
             its, _ = outer.solve(sg.A.matvec, cycle, b, y, rtol, atol, -(-max_it // k))
             its *= k
