@@ -126,12 +126,15 @@ class SingleCycles:
     def setUp(self, pc):
         pass
 
-    def apply(self, pc, x, y):
+    def run(self, v, out):
+        """One cycle: ``out`` (float64 or the work dtype) from ``v``; returns its iterations."""
         step = self.step
         sg = step.single_context()
         gm = sg.gmres("inner", int(step.idx.size), self.cycle, step.fft._allsum, flexible=False)
-        its, _ = gm.solve(sg.A.matvec, _identity, x.getArray(readonly=True), y.getArray(), 0.0, 0.0, self.cycle)
-        step.single_iterations += its
+        return gm.solve(sg.A.matvec, _identity, v, out, 0.0, 0.0, self.cycle)[0]
+
+    def apply(self, pc, x, y):
+        self.step.single_iterations += self.run(x.getArray(readonly=True), y.getArray())
 
 
 class SubsetStep:
@@ -277,15 +280,10 @@ class SubsetStep:
             gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.mode == "contact")
             its, _ = gm.solve(sg.A.matvec, sg.B.matvec, b, y, rtol, atol, max_it)
         else:   # cycles (freeset.start_cycles): FGMRES over exactly k GMRES iterations, as the KSP does
-            inner = sg.gmres("inner", n_loc, k, allsum, flexible=False)
             restart = self.settings.single_restart(n_loc, "free", fgmres_vectors, reserve=k + 3)
             restart = self.comm.allreduce(restart, op=MPI.MIN)
             outer = sg.gmres("outer", n_loc, min(restart, -(-max_it // k)), allsum, flexible=True)
-
-            def cycle(v, out):
-                inner.solve(sg.A.matvec, _identity, v, out, 0.0, 0.0, k)
-
-            its, _ = outer.solve(sg.A.matvec, cycle, b, y, rtol, atol, -(-max_it // k))
+            its, _ = outer.solve(sg.A.matvec, SingleCycles(self, k).run, b, y, rtol, atol, -(-max_it // k))
             its *= k
         self.iterations += its
         self.single_iterations += its
