@@ -6,7 +6,8 @@
 * the solver with single-precision changing steps against double precision on paper surfaces at
   10 m/s (free-set and contact-set steps): the same answer to the solver's tolerance, and the float32
   pairs really ran (and only while the policy allows them);
-* the float32 GMRES cycles under PETSc's FGMRES (cycle_precision) against PETSc's own cycles.
+* the float32 GMRES cycles under PETSc's FGMRES (cycle_precision) against PETSc's own cycles;
+* float32 pairs in the preconditioners of FGMRES (pc_range_max) against float64 ones.
 """
 import numpy as np
 import pytest
@@ -121,6 +122,10 @@ def test_single_gmres_flexible_same_iterations():
     assert np.linalg.norm(res[0][1] - res[1][1]) <= 1e-4 * np.linalg.norm(res[0][1])
 
 
+# double precision throughout: the reference of the float32 variants
+_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0"}
+
+
 def _solve(N, v, sigma0, options):
     fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
     h = generate(fft, L_PAPER, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), 1)
@@ -134,10 +139,11 @@ def _solve(N, v, sigma0, options):
                                                      (1.0e6, "free", 1.0), (1.0e5, "contact", 1.0)])
 def test_single_steps_same_solution(sigma0, mode, range_max):
     """float32 basis with float32 pairs (range_max above the stiffness's range, 4e3 here) and with
-    float64 pairs (range_max 1)."""
+    float64 pairs (range_max 1; the preconditioners' pairs too: pc_range_max)."""
     one, act1, pairs1 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "single",
-                                                   "vc_single_range_max": str(range_max)})
-    two, act2, pairs2 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "double", "vc_cycle_precision": "double"})
+                                                   "vc_single_range_max": str(range_max),
+                                                   "vc_pc_range_max": str(range_max)})
+    two, act2, pairs2 = _solve(256, 10.0, sigma0, _DOUBLE)
     assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
     assert one.diagnostics["step_modes"][-1][1] == mode
     d1, d2 = one.diagnostics, two.diagnostics
@@ -153,6 +159,17 @@ def test_single_steps_same_solution(sigma0, mode, range_max):
     assert abs(one.iterations - two.iterations) <= 1
 
 
+def _same_path(one, act1, two, act2):
+    """Both converged to the solver's tolerance, the same Newton steps with Krylov iterations within
+    one cycle of 20 each, at most 4 points (on the contact line) in another set, μ to 1e-6."""
+    assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
+    h1, h2 = np.diff(one.diagnostics["linear_history"]), np.diff(two.diagnostics["linear_history"])
+    assert len(h1) == len(h2) and np.all(np.abs(h1 - h2) <= 20), (h1, h2)
+    differ = int(np.count_nonzero(act1 != act2))
+    assert differ <= 4, differ
+    assert abs(one.mu / two.mu - 1) <= 1e-6, (one.mu, two.mu)
+
+
 def test_single_cycles_same_solution():
     """cycle_precision single: once the free-set steps cycle (changing steps capped at 10 iterations:
     the first uses its cap, the cycles start), the steps PETSc solves run its float64 FGMRES over GMRES
@@ -161,26 +178,42 @@ def test_single_cycles_same_solution():
     rounding (one cycle each), and the answer is the same to the solver's tolerance."""
     base = {"vc_changing_precision": "double", "vc_cycle_after_cap": "1", "vc_lin_maxit_changing": "10"}
     one, act1, pairs1 = _solve(256, 10.0, 1.0e6, dict(base, vc_cycle_precision="single"))
-    two, act2, pairs2 = _solve(256, 10.0, 1.0e6, dict(base, vc_cycle_precision="double"))
-    assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
+    two, act2, pairs2 = _solve(256, 10.0, 1.0e6, dict(base, vc_cycle_precision="double", vc_pc_range_max="0"))
     d1, d2 = one.diagnostics, two.diagnostics
     assert d1["step_modes"][-1][1] == "free"
     # float32 only in the cycles (changing_precision double), and they did most of the work
     assert d1["single_iterations"] > 0.5 * one.linear_iterations and d2["single_iterations"] == 0
     assert pairs1 > 0.3 * one.fft_pairs and pairs2 == 0
-    h1, h2 = np.diff(d1["linear_history"]), np.diff(d2["linear_history"])
-    assert len(h1) == len(h2) and np.all(np.abs(h1 - h2) <= 20), (h1, h2)
-    differ = int(np.count_nonzero(act1 != act2))
-    assert differ <= 4, differ
-    assert abs(one.mu / two.mu - 1) <= 1e-6, (one.mu, two.mu)
+    _same_path(one, act1, two, act2)
+
+
+@pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.0e5, "contact")])
+def test_float32_preconditioner_pairs(sigma0, mode):
+    """pc_range_max: where the steps' own pairs are float64 (single_range_max 1, below the stiffness's
+    range of 4e3 here), the preconditioners of FGMRES run float32 pairs up to pc_range_max, and only
+    there: the float32 GMRES cycles of the free set (from the second step on: the first uses its cap of
+    10) and the stiffness of the contact-set steps (PETSc's FGMRES in double).  FGMRES applies its
+    operator in float64 to the preconditioned vectors it keeps, so the answer is the same to the
+    solver's tolerance, and the steps' iterations are within one cycle (free) or a few (contact)."""
+    base = {"vc_changing_precision": "double", "vc_single_range_max": "1"}
+    if mode == "free":
+        base.update(vc_cycle_after_cap="1", vc_lin_maxit_changing="10")
+    one, act1, pairs1 = _solve(256, 10.0, sigma0, dict(base, vc_pc_range_max="1e30"))
+    two, act2, pairs2 = _solve(256, 10.0, sigma0, dict(base, vc_pc_range_max="1"))
+    d1, d2 = one.diagnostics, two.diagnostics
+    assert d1["step_modes"][-1][1] == mode
+    assert d1["float32_pairs"] and not d2["float32_pairs"]
+    assert pairs1 > 0.3 * one.fft_pairs and pairs2 == 0
+    _same_path(one, act1, two, act2)
 
 
 def test_single_steps_only_where_allowed():
     # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol:
-    # no float32
-    for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2"},
-                    {"vc_single_rtol_min": "0.5", "vc_cycle_precision": "double"},
-                    {"ksp_type": "gmres", "contact_ksp_type": "fgmres"}):
+    # no float32 basis; no float32 pairs either without pc_range_max (preconditioners of FGMRES), and
+    # none with it where the user chose the Krylov methods (theirs need not be flexible)
+    for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2", "vc_pc_range_max": "0"},
+                    {"vc_single_rtol_min": "0.5", "vc_cycle_precision": "double", "vc_pc_range_max": "0"},
+                    {"ksp_type": "gmres", "contact_ksp_type": "fgmres", "vc_pc_range_max": "1e30"}):
         r, _, pairs = _solve(128, 10.0, 1.0e6, options)
         assert r.converged and pairs == 0, options
 

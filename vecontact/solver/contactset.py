@@ -30,6 +30,8 @@ so its residual norm is the gap error on C in units of h_rms; restart SolverSett
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from mpi4py import MPI
 
@@ -65,6 +67,15 @@ class ContactSetStep(SubsetStep):
 
     def preconditioner(self):
         return Restricted(self, self.op.m, self._remove_mean)
+
+    def step_pc(self):
+        """B, with float32 pairs where the inner KSP is vecontact's FGMRES and float32_pc() holds: a
+        flexible method's preconditioner may round more than its operator (RESULTS.md, pc_range_max)."""
+        B = self.preconditioner()
+        key = self._prefix + "ksp_type"
+        if key in self._own_keys and self.PETSc.Options().getString(key) == "fgmres" and self.float32_pc():
+            return B.on(self.float32_grid())
+        return B
 
     def _remove_mean(self, y, full):
         y -= self.mean_C(y)
@@ -129,7 +140,7 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    step = ContactSetStep(op, op.kappa, PETSc, prefix, settings)
+    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0))   # today's step, float64
     r = y = None
     try:
         t0 = fft.transforms

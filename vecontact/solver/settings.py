@@ -87,6 +87,8 @@ class SolverSettings:
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
                                  "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
                                  choices=("single", "double"))
+    pc_range_max: float = _knob(1e6, "the preconditioners of FGMRES (free-set cycles, contact-set stiffness) with "
+                                "float32 FFT pairs while max|m_q|/min|m_q| <= this (0: never) [RESULTS.md]", lo=0)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)

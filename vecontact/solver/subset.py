@@ -13,20 +13,45 @@ from mpi4py import MPI
 
 from vecontact.solver.single import SingleGMRES
 
-__all__ = ["Restricted", "SingleCycles", "SubsetStep"]
+__all__ = ["Grid", "Restricted", "SingleCycles", "SubsetStep"]
+
+
+class Grid:
+    """Where a Restricted product is formed: a SlabFFT (a step's, or its single-precision twin), its
+    real buffer ``buf`` (zero outside S: SubsetStep.select keeps it so), the whole-grid product ``out``
+    and a scratch of their dtype (``gathered``) for products wanted in the other precision."""
+
+    def __init__(self, fft):
+        self.fft = fft
+        self.buf = fft.real_array()
+        self.out = fft.real_array()
+        self._gathered = np.empty(0, dtype=self.buf.dtype)
+
+    def gathered(self, n):
+        """A scratch array of n entries, of the grid's dtype."""
+        if self._gathered.size < n:
+            self._gathered = np.empty(n, dtype=self.buf.dtype)
+        return self._gathered[:n]
 
 
 class Restricted:
     """y = (multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python Mat
     and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT.  ``grid``:
-    where the product is formed (its ``fft``, ``buf`` zero outside S, ``out``), the step itself or its
-    single-precision copy (``_Single``)."""
+    the Grid where the product is formed (default the step's float64 one)."""
 
     def __init__(self, step, multiplier, post=None, grid=None):
         self.step = step
         self.multiplier = multiplier
         self.post = post
-        self.grid = step if grid is None else grid
+        self.grid = step.grid if grid is None else grid
+
+    def on(self, grid):
+        """The same product formed on ``grid`` (the multiplier cast to its precision)."""
+        if grid is self.grid:
+            return self
+        m = np.asarray(self.multiplier)
+        m = m.astype(grid.fft.complex_dtype if np.iscomplexobj(m) else grid.fft.real_dtype, copy=False)
+        return Restricted(self.step, m, self.post, grid)
 
     def matvec(self, x, y):
         """y = the product of x (arrays of the local points of S; y of another precision than the
@@ -56,44 +81,21 @@ class Restricted:
 
 
 class _Single:
-    """What a step's inner solve in single precision (single.py) works with: its operator and
-    preconditioner, in float32 on the SlabFFT's single-precision twin (complex64 multipliers, float32
-    grid buffers) when ``float32_pairs``, else on the step's float64 grid (their float32 results
-    gathered through ``gathered``); and the memory of the GMRES bases (kept between steps, viewed at
-    the size of the current S)."""
+    """What a step's inner solve in single precision (single.py) works with: its operator, on the
+    step's float32 Grid when ``float32_pairs`` (work dtype float32) and else on its float64 one; its
+    preconditioner, on the float32 Grid with ``float32_pc`` too; and the memory of the GMRES bases
+    (kept between steps, viewed at the size of the current S)."""
 
-    def __init__(self, step, float32_pairs):
-        A, B = step.operator(), step.preconditioner()
-        self.work = np.float32 if float32_pairs else np.float64
-        self.fft = step.fft
-        self.out = step.out
-        self._gathered = np.empty(0)
-        if float32_pairs:
-            self.fft = step.fft.single()
-            self.buf = self.fft.real_array()
-            self.out = self.fft.real_array()
-            m_A, m_B = (np.asarray(o.multiplier).astype(np.complex64) for o in (A, B))
-        else:
-            self.buf = step.buf
-            m_A, m_B = A.multiplier, B.multiplier
-        self.A = Restricted(step, m_A, A.post, grid=self)
-        self.B = Restricted(step, m_B, B.post, grid=self)
+    def __init__(self, step, float32_pairs, float32_pc=False):
+        grid = step.float32_grid() if float32_pairs else step.grid
+        self.work = grid.buf.dtype.type
+        self.A = step.operator().on(grid)
+        self.B = step.preconditioner().on(step.float32_grid() if float32_pairs or float32_pc else grid)
         self._stores = {}
 
     def free(self):
         """Drop the bases' memory (made again by the next single-precision solve)."""
         self._stores = {}
-
-    def clear(self, idx):
-        """Zero the float32 grid buffer at ``idx`` (the step's own is cleared by select)."""
-        if self.work == np.float32:
-            self.buf.reshape(-1)[idx] = 0.0
-
-    def gathered(self, n):
-        """A float64 scratch array of n entries."""
-        if self._gathered.size < n:
-            self._gathered = np.empty(n)
-        return self._gathered[:n]
 
     def gmres(self, slot, n_loc, restart, allsum, flexible):
         """A SingleGMRES working in the memory of ``slot`` (grown when too small)."""
@@ -111,13 +113,13 @@ def _identity(v, out):
 
 class SingleCycles:
     """Python PC of a step's inner FGMRES (PETSc, float64 basis): exactly ``cycle`` iterations of
-    unpreconditioned GMRES on the step's operator, with a float32 basis (single.py; its pairs as
-    _Single's).  A cycle cuts the residual by far less than float32 rounding limits, and the outer
-    FGMRES keeps its own float64 space across the cycles (its operator in float64), so steps solved to
-    any tolerance (exact ones too, with the measure stop on the outer KSP) keep a float32 basis where
-    the work is (SolverSettings.cycle_precision).  Unpreconditioned, as PETSc's cycles
-    (settings.PETSC_FREE_CYCLE_DEFAULTS): with the step's compliance PC the solves took 1.2-1.7x the
-    pairs [RESULTS.md]."""
+    unpreconditioned GMRES on the step's operator, with a float32 basis (single.py; its pairs in
+    float32 by SubsetStep.cycle_context).  A cycle cuts the residual by far less than float32
+    rounding limits, and the outer FGMRES keeps its own float64 space across the cycles (its operator
+    in float64), so steps solved to any tolerance (exact ones too, with the measure stop on the outer
+    KSP) keep a float32 basis where the work is (SolverSettings.cycle_precision).  Unpreconditioned,
+    as PETSc's cycles (settings.PETSC_FREE_CYCLE_DEFAULTS): with the step's compliance PC the solves
+    took 1.2-1.7x the pairs [RESULTS.md]."""
 
     def __init__(self, step, cycle):
         self.step = step
@@ -129,7 +131,7 @@ class SingleCycles:
     def run(self, v, out):
         """One cycle: ``out`` (float64 or the work dtype) from ``v``; returns its iterations."""
         step = self.step
-        sg = step.single_context()
+        sg = step.cycle_context()
         gm = sg.gmres("inner", int(step.idx.size), self.cycle, step.fft._allsum, flexible=False)
         return gm.solve(sg.A.matvec, _identity, v, out, 0.0, 0.0, self.cycle)[0]
 
@@ -155,8 +157,9 @@ class SubsetStep:
         self.PETSc = PETSc
         self.settings = settings
         self.shape = fft.local_real_shape
-        self.buf = fft.real_array()     # zero outside S (maintained by select)
-        self.out = fft.real_array()
+        self.grid = Grid(fft)           # the float64 products (Restricted); buf zero outside S (select)
+        self.buf, self.out = self.grid.buf, self.grid.out
+        self._grid32 = None             # the float32 one (float32_grid)
         self.w = fft.real_array()
         self.idx = np.zeros(0, dtype=np.intp)
         self._r = None                  # right-hand side (local rows) of the running apply, for update()
@@ -164,6 +167,7 @@ class SubsetStep:
         self.single = False             # the next solves in single precision (set_tolerances)
         self._single = None             # _Single, made on the first single-precision solve
         self.float32_pairs = None       # its pairs in float32 too (the stiffness's range, _Single)
+        self._cycles = None             # _Single of the float32 cycles (cycle_context)
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
         self.single_iterations = 0      # ... of them with a float32 basis (single.py)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
@@ -197,9 +201,9 @@ class SubsetStep:
     def select(self, idx, n_S):
         """Make S the local points ``idx`` (flat, sorted), ``n_S`` points on all ranks (> 0)."""
         PETSc = self.PETSc
-        self.buf.reshape(-1)[self.idx] = 0.0
-        if self._single is not None:
-            self._single.clear(self.idx)
+        for grid in (self.grid, self._grid32):
+            if grid is not None:
+                grid.buf.reshape(-1)[self.idx] = 0.0
         n_loc = int(idx.size)
         self.idx = idx
         self.n_S = int(n_S)
@@ -237,7 +241,7 @@ class SubsetStep:
                     self._own_keys.append(key)
         pc = self.ksp.getPC()
         pc.setType("python")
-        pc.setPythonContext(self.preconditioner() if pc_context is None else pc_context)
+        pc.setPythonContext(self.step_pc() if pc_context is None else pc_context)
         self.ksp.setFromOptions()
         self.cycle = getattr(pc_context, "cycle", 1)
         if pc.getType() == "ksp":
@@ -255,12 +259,42 @@ class SubsetStep:
             self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
 
+    def step_pc(self):
+        """The inner KSP's Python PC: preconditioner() (ContactSetStep: in float32 where it may be)."""
+        return self.preconditioner()
+
+    def float32_grid(self):
+        """The Grid on the SlabFFT's single-precision twin (made on first use)."""
+        if self._grid32 is None:
+            self._grid32 = Grid(self.fft.single())
+        return self._grid32
+
+    def float32_pc(self):
+        """Whether a preconditioner of a flexible method (FGMRES), which may round more than the
+        operator, runs float32 pairs: the stiffness's range at most SolverSettings.pc_range_max."""
+        return self.stiffness_range() <= self.settings.pc_range_max
+
     def single_context(self):
-        """The step's _Single (made on first use; its pairs in float32 by the stiffness's range)."""
+        """The step's _Single (made on first use; its pairs in float32 by the stiffness's range, and on
+        the contact set, whose float32 steps are flexible, its preconditioner's by float32_pc)."""
         if self._single is None:
             self.float32_pairs = self.stiffness_range() <= self.settings.single_range_max
-            self._single = _Single(self, self.float32_pairs)
+            self._single = _Single(self, self.float32_pairs, self.mode == "contact" and self.float32_pc())
         return self._single
+
+    def cycle_context(self):
+        """The _Single of the float32 GMRES cycles (SingleCycles): single_context(), or, where its pairs
+        are float64 and float32_pc holds, one with float32 pairs (a cycle is the preconditioner of an
+        FGMRES whose operator stays float64)."""
+        if self._cycles is None:
+            sg = self.single_context()
+            self._cycles = sg if self.float32_pairs or not self.float32_pc() else _Single(self, True)
+        return self._cycles
+
+    @property
+    def ran_float32_pairs(self):
+        """Whether this step's solves ran float32 pairs (in float32 steps or cycles)."""
+        return bool(self.float32_pairs) or self._grid32 is not None
 
     def _solve_single(self):
         sg = self.single_context()
@@ -307,4 +341,4 @@ class SubsetStep:
             except Exception:
                 pass
         self._own_keys = []
-        self._single = None
+        self._single = self._cycles = self._grid32 = None
