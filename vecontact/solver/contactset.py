@@ -72,8 +72,8 @@ class ContactSetStep(SubsetStep):
         """B, with float32 pairs where the inner KSP is vecontact's FGMRES and float32_pc() holds: a
         flexible method's preconditioner may round more than its operator (RESULTS.md, pc_range_max)."""
         B = self.preconditioner()
-        key = self._prefix + "ksp_type"
-        if key in self._own_keys and self.PETSc.Options().getString(key) == "fgmres" and self.float32_pc():
+        flexible = self.PETSc.Options().getString(self._prefix + "ksp_type") == "fgmres"
+        if self.own_krylov() and flexible and self.float32_pc():
             return B.on(self.float32_grid())
         return B
 

@@ -68,7 +68,7 @@ class FreeSetStep(SubsetStep):
         (SingleCycles) or, cycle_precision double, in PETSc.  Nothing when free_cycle is 0,
         when it already runs so, or when the user chose the inner KSP's type (-ksp_type).  Collective."""
         k = self.settings.free_cycle
-        if k == 0 or self.cycle > 1 or self._prefix + "ksp_type" not in self._own_keys:
+        if k == 0 or self.cycle > 1 or not self.own_krylov():
             return
         if self.settings.cycle_precision == "single":   # the cycles with a float32 basis (subset.py)
             restart = self.settings.single_restart(self.idx.size, "free", 2, reserve=k + 3)

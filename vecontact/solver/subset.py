@@ -8,6 +8,8 @@ basis vector, and the GMRES restart that fits the memory budget grows by N^2 / |
 """
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from mpi4py import MPI
 
@@ -18,14 +20,27 @@ __all__ = ["Grid", "Restricted", "SingleCycles", "SubsetStep"]
 
 class Grid:
     """Where a Restricted product is formed: a SlabFFT (a step's, or its single-precision twin), its
-    real buffer ``buf`` (zero outside S: SubsetStep.select keeps it so), the whole-grid product ``out``
-    and a scratch of their dtype (``gathered``) for products wanted in the other precision."""
+    real buffer ``buf`` (zero outside S: SubsetStep.select keeps it so), the whole-grid product ``out``,
+    a scratch of their dtype (``gathered``) for products wanted in the other precision, and the
+    multipliers cast to its precision (``cast``, one copy each)."""
 
     def __init__(self, fft):
         self.fft = fft
         self.buf = fft.real_array()
         self.out = fft.real_array()
         self._gathered = np.empty(0, dtype=self.buf.dtype)
+        self._casts = {}
+
+    def cast(self, multiplier):
+        """``multiplier`` in the grid's precision (the same array if it already is; made once)."""
+        m = np.asarray(multiplier)
+        dtype = self.fft.complex_dtype if np.iscomplexobj(m) else self.fft.real_dtype
+        if m.dtype == dtype:
+            return m
+        hit = self._casts.get(id(multiplier))
+        if hit is None or hit[0] is not multiplier:      # the source is kept, so its id stays its own
+            hit = self._casts[id(multiplier)] = (multiplier, m.astype(dtype))
+        return hit[1]
 
     def gathered(self, n):
         """A scratch array of n entries, of the grid's dtype."""
@@ -49,9 +64,7 @@ class Restricted:
         """The same product formed on ``grid`` (the multiplier cast to its precision)."""
         if grid is self.grid:
             return self
-        m = np.asarray(self.multiplier)
-        m = m.astype(grid.fft.complex_dtype if np.iscomplexobj(m) else grid.fft.real_dtype, copy=False)
-        return Restricted(self.step, m, self.post, grid)
+        return Restricted(self.step, grid.cast(self.multiplier), self.post, grid)
 
     def matvec(self, x, y):
         """y = the product of x (arrays of the local points of S; y of another precision than the
@@ -87,11 +100,17 @@ class _Single:
     (kept between steps, viewed at the size of the current S)."""
 
     def __init__(self, step, float32_pairs, float32_pc=False):
+        self.step = step
         grid = step.float32_grid() if float32_pairs else step.grid
         self.work = grid.buf.dtype.type
         self.A = step.operator().on(grid)
-        self.B = step.preconditioner().on(step.float32_grid() if float32_pairs or float32_pc else grid)
+        self._B_grid = step.float32_grid() if float32_pairs or float32_pc else grid
         self._stores = {}
+
+    @cached_property
+    def B(self):
+        """The preconditioner (made on first use: the cycles never use it)."""
+        return self.step.preconditioner().on(self._B_grid)
 
     def free(self):
         """Drop the bases' memory (made again by the next single-precision solve)."""
@@ -158,7 +177,7 @@ class SubsetStep:
         self.settings = settings
         self.shape = fft.local_real_shape
         self.grid = Grid(fft)           # the float64 products (Restricted); buf zero outside S (select)
-        self.buf, self.out = self.grid.buf, self.grid.out
+        self.out = self.grid.out
         self._grid32 = None             # the float32 one (float32_grid)
         self.w = fft.real_array()
         self.idx = np.zeros(0, dtype=np.intp)
@@ -190,7 +209,7 @@ class SubsetStep:
         ``single``: solve in single precision (single.py) with these tolerances instead of the KSP."""
         self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=-(-max_it // self.cycle))
         # not when the user chose the Krylov method (-ksp_type / -contact_ksp_type): theirs runs
-        self.single = bool(single) and self._prefix + "ksp_type" in self._own_keys
+        self.single = bool(single) and self.own_krylov()
         self._tolerances = (rtol, atol, max_it)
         if not self.single and self._single is not None:
             self._single.free()           # the KSP's own basis takes the memory budget now
@@ -259,6 +278,11 @@ class SubsetStep:
             self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
 
+    def own_krylov(self):
+        """Whether the inner KSP's type is vecontact's default, not one the user chose (-ksp_type /
+        -contact_ksp_type): only then may its solves change method or precision."""
+        return self._prefix + "ksp_type" in self._own_keys
+
     def step_pc(self):
         """The inner KSP's Python PC: preconditioner() (ContactSetStep: in float32 where it may be)."""
         return self.preconditioner()
@@ -293,8 +317,9 @@ class SubsetStep:
 
     @property
     def ran_float32_pairs(self):
-        """Whether this step's solves ran float32 pairs (in float32 steps or cycles)."""
-        return bool(self.float32_pairs) or self._grid32 is not None
+        """Whether this step's solves ran float32 pairs (steps, cycles or preconditioners: only they make
+        the float32 Grid)."""
+        return self._grid32 is not None
 
     def _solve_single(self):
         sg = self.single_context()
