@@ -127,3 +127,27 @@ def test_policy_reads_its_settings():
     s = SolverSettings(lin_rtol=0.3, first_rtol_factor=0.5, lin_maxit_changing=7, inner_atol_factor=2.0)
     first = StepPolicy(s, 1.0).step(-1, "contact")
     assert first == (pytest.approx(0.15, **ROUND), 2.0, 7)
+
+
+@pytest.mark.parametrize("mode", ["contact", "free"])
+def test_single_precision_floor_by_mode(mode):
+    """A changing step solves in single precision while its rtol is at least the floor of its mode:
+    single_rtol_min (1e-2) on the free set, single_rtol_min_contact (0: any rtol) on the contact set,
+    whose flexible solve forms the solution from the preconditioned vectors; exact steps never."""
+    p = StepPolicy(S, 1.0)
+    singles = []
+    for res, change in [(1.0, -1), (0.5, 1000), (0.4, 900), (0.3, 800), (0.2, 700), (0.1, 0)]:
+        p.record_residual(res)
+        rtol = p.step(change, mode)[0]
+        singles.append((rtol, p.single))
+    assert singles[-1] == (S.exact_rtol, False)
+    floor = S.single_rtol_min_contact if mode == "contact" else S.single_rtol_min
+    assert any(rtol < S.single_rtol_min for rtol, _ in singles[:-1])      # the wandering steps tightened
+    assert [single for _, single in singles[:-1]] == [rtol >= floor for rtol, _ in singles[:-1]]
+    if mode == "free":
+        assert not all(single for _, single in singles[:-1])
+    else:
+        assert all(single for _, single in singles[:-1])
+    off = StepPolicy(SolverSettings(changing_precision="double"), 1.0)
+    off.step(-1, mode)
+    assert not off.single

@@ -212,7 +212,8 @@ def test_single_steps_only_where_allowed():
     # no float32 basis; no float32 pairs either without pc_range_max (preconditioners of FGMRES), and
     # none with it where the user chose the Krylov methods (theirs need not be flexible)
     for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2", "vc_pc_range_max": "0"},
-                    {"vc_single_rtol_min": "0.5", "vc_cycle_precision": "double", "vc_pc_range_max": "0"},
+                    {"vc_single_rtol_min": "0.5", "vc_single_rtol_min_contact": "0.5", "vc_cycle_precision": "double",
+                     "vc_pc_range_max": "0"},
                     {"ksp_type": "gmres", "contact_ksp_type": "fgmres", "vc_pc_range_max": "1e30"}):
         r, _, pairs = _solve(128, 10.0, 1.0e6, options)
         assert r.converged and pairs == 0, options

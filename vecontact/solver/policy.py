@@ -20,8 +20,10 @@ Tolerances (rtol, atol, max_it) of a step's Krylov solve:
   step on an unchanged set still did not converge, atol x atol_retry_factor.  The 2-norm atol is a
   cap: the measure stop (measurestop.py) usually ends an exact step well before it.
 
-A changing step whose rtol is at least single_rtol_min solves in single precision (``single``,
-single.py; changing_precision): its tolerance is far above float32 rounding.
+A changing step solves in single precision (``single``, single.py; changing_precision) while its rtol
+is at least the floor of its mode: single_rtol_min on the free set (tighter, a float32 basis left the
+next iterate less accurate), single_rtol_min_contact (0) on the contact set, whose flexible solve forms
+the solution from the preconditioned vectors, not from the float32 basis [RESULTS.md].
 
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
 iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
@@ -116,6 +118,7 @@ class StepPolicy:
             return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
         cap = min(s.ksp_max_it, self.maxit_changing)
-        self.single = s.changing_precision == "single" and rtol >= s.single_rtol_min
+        floor = s.single_rtol_min_contact if mode == "contact" else s.single_rtol_min
+        self.single = s.changing_precision == "single" and rtol >= floor
         self._last = (mode, change, cap)
         return rtol, atol, cap

@@ -82,6 +82,8 @@ class SolverSettings:
                                     "Krylov basis (single.py) [RESULTS.md]", choices=("single", "double"))
     single_rtol_min: float = _knob(1e-2, "... only while their rtol is at least this (tighter: the float32 "
                                    "basis falls short) [RESULTS.md]", lo=0, hi=1, lo_open=True)
+    single_rtol_min_contact: float = _knob(0.0, "... the same on the contact set (flexible: the solution is "
+                                           "formed from the preconditioned vectors) [RESULTS.md]", lo=0, hi=1)
     single_range_max: float = _knob(1.5e5, "... with float32 FFT pairs too while max|m_q|/min|m_q| <= this, else "
                                     "float64 pairs and a float32 basis [RESULTS.md]", lo=0)
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
