@@ -4,13 +4,14 @@ changes.
 A changing step only needs its Krylov residual cut by lin_rtol (policy.py), far above float32
 rounding (6e-8); free-set steps tightened below SolverSettings.single_rtol_min (1e-2) run in double,
 where a float32 basis left the next iterate less accurate (the contact set's flexible steps form
-their solution from the preconditioned vectors and keep the float32 basis: single_rtol_min_contact).  The step's two costs are memory-bound: the
-classical Gram-Schmidt over the basis, and the FFT pairs of the operator and of the preconditioner.
-The basis is a float32 block streamed by BLAS sgemv: half the bytes (its products summed in float64
-over chunks, _dots).  The pairs can run in float32 too (SlabFFT.single(), about half the time) only while the stiffness's range
-of scales is small: a float32 pair rounds the preconditioned vector (a gap, dominated by long
-waves) to 6e-8 of its size, and the stiffness then amplifies that noise at short waves by up to
-max|m_q| / min|m_q| (SolverSettings.single_range_max); beyond it the pairs stay float64.
+their solution from the preconditioned vectors and keep the float32 basis: single_rtol_min_contact).
+The step's two costs are memory-bound: the classical Gram-Schmidt over the basis, and the FFT pairs
+of the operator and of the preconditioner.  The basis is a float32 block streamed by BLAS sgemv: half
+the bytes (its products summed in float64 over chunks, _dots).  The pairs can run in float32 too
+(SlabFFT.single(), about half the time) only while the stiffness's range of scales is small: a
+float32 pair rounds the preconditioned vector (a gap, dominated by long waves) to 6e-8 of its size,
+and the stiffness then amplifies that noise at short waves by up to max|m_q| / min|m_q|
+(SolverSettings.single_range_max); beyond it the pairs stay float64.
 PETSc cannot do either: its vectors have one precision per build.
 
 The method is PETSc's KSPGMRES (or, ``flexible``, KSPFGMRES) with right preconditioning, x0 = 0,
