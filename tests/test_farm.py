@@ -318,6 +318,32 @@ def test_serial_run(reference):
         assert len(dg["active_set_changes"]) == row["iterations"]
 
 
+def test_fft_planner_patient_reaches_the_grid_and_keeps_the_results(reference, tmp_path):
+    """numerics.fft_planner: the farm plans its SlabFFT (and through it the coarse grids) with it; the
+    answers stay those of the default planner to solver tolerance; the stored job names it."""
+    _, ref, _, _ = reference
+    job = write_job(tmp_path / "job.yaml", fft_planner="patient")
+    p = vecontact(0, ["run", job], cwd=tmp_path, env={"XDG_CACHE_HOME": str(tmp_path / "cache")})
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert_same_results(ref, cases_of(tmp_path / "out.h5"))
+    with h5py.File(tmp_path / "out.h5", "r") as f:
+        assert yaml.safe_load(f.attrs["job_yaml"])["numerics"]["fft_planner"] == "patient"
+    assert list((tmp_path / "cache" / "vecontact").glob("fftw-wisdom-*.pkl"))     # planned here, kept
+
+
+def test_worker_builds_its_grid_with_the_jobs_planner(monkeypatch, tmp_path):
+    from mpi4py import MPI
+    import vecontact.core.pfft as pfft
+    from vecontact import job as jobs
+    from vecontact.farm.worker import Worker
+    made = []
+    monkeypatch.setattr(pfft, "SlabFFT", lambda comm, N, **kw: made.append((N, kw)) or object())
+    for given, want in (({}, "measure"), ({"fft_planner": "patient"}, "patient")):
+        job = jobs.load(write_job(tmp_path / "job.yaml", **given))
+        Worker(job, MPI.COMM_SELF, None, [], {}, {}, {}, [], {}).fft(MPI.COMM_SELF, 64)
+        assert made[-1] == (64, {"threads": 1, "planner": want})
+
+
 @pytest.mark.parametrize("rpc", [1, 2])
 def test_two_ranks_equal_serial(reference, tmp_path, rpc):
     _, ref, _, _ = reference

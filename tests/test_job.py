@@ -121,6 +121,20 @@ def test_physics_hash_ignores_output_only():
     assert jobs.physics_hash(a) != jobs.physics_hash(c)
 
 
+def test_fft_planner_is_optional_choice_and_not_physics():
+    """numerics.fft_planner: measure or patient; stored only when given (the text of earlier jobs
+    stays), and not part of the restart hash (it changes rounding only)."""
+    plain = jobs.resolve(copy.deepcopy(GOOD), ROOT)
+    patient = jobs.resolve(_bad("numerics.fft_planner", "patient"), ROOT)
+    assert plain.numerics.fft_planner is None and "fft_planner" not in plain.to_dict()["numerics"]
+    assert patient.numerics.fft_planner == "patient" and patient.to_dict()["numerics"]["fft_planner"] == "patient"
+    assert jobs.physics_hash(plain) == jobs.physics_hash(patient)
+    for bad in ("exhaustive", "fast", 3):
+        with pytest.raises(InputError) as err:
+            jobs.resolve(_bad("numerics.fft_planner", bad), ROOT)
+        assert err.value.key == "numerics.fft_planner" and "measure, patient" in str(err.value)
+
+
 def test_seeds_per_q1():
     """A seeds mapping gives the small systems more realisations; the seeds are not physics."""
     from vecontact import cases as sweep

@@ -25,11 +25,13 @@ MODELS = ("elastic", "sls", "prony", "havriliak-negami", "table")
 SPECTRA = ("self-affine", "file", "psd")
 FIELDS = ("pressure", "gap", "displacement", "contact")
 SOLVERS = ("snes", "pk")
+FFT_PLANNERS = ("measure", "patient")     # FFTW planners a job may ask for (benchmarks/RESULTS.md)
 
 # Keys that do not change any number in the results: ignored by the restart hash. A seed's cases
 # do not depend on the other seeds, so a sweep may be resumed with more (or fewer) seeds.
 NON_PHYSICS = {("output",), ("numerics", "ranks_per_case"), ("numerics", "threads"),
-               ("numerics", "fields"), ("numerics", "downsample"), ("surface", "seeds")}
+               ("numerics", "fft_planner"), ("numerics", "fields"), ("numerics", "downsample"),
+               ("surface", "seeds")}
 
 
 # --------------------------------------------------------------------------------------------
@@ -373,7 +375,7 @@ def _numerics(job, material):
     n = _section(job, "numerics", required=False)
     p = "numerics"
     _unknown(n, p, {"enabled", "solver", "tolerance", "petsc", "fields", "downsample",
-                    "ranks_per_case", "coarse", "max_iterations", "threads"})
+                    "ranks_per_case", "coarse", "max_iterations", "threads", "fft_planner"})
     out = {"enabled": _bool(n, "enabled", p, False)}
     out["solver"] = _choice(n, "solver", p, SOLVERS, default="snes")
     if out["solver"] == "pk" and material.model != "elastic":
@@ -396,6 +398,8 @@ def _numerics(job, material):
     out["coarse"] = _bool(n, "coarse", p, True)
     out["max_iterations"] = _number(n, "max_iterations", p, required=False, lo=1, integer=True)
     out["threads"] = _number(n, "threads", p, default=1, lo=1, integer=True)
+    if "fft_planner" in n:      # stored only when given: earlier jobs keep their text
+        out["fft_planner"] = _choice(n, "fft_planner", p, FFT_PLANNERS)
     return Numerics.from_dict(out)
 
 

@@ -31,8 +31,9 @@ MATERIAL_KEYS = {
     "prony": ("model", "nu", "E0", "terms"),
     "table": ("model", "nu", "file", "frequency_unit", "modulus_unit", "columns", "vertical_shift", "wlf"),
 }
-#: Keys stored only when they have a value (C0 or hrms; an instrument file's ``source``).
-_ONLY_WITH_VALUE = {"C0", "hrms", "source"}
+#: Keys stored only when they have a value (C0 or hrms; an instrument file's ``source``; ``fft_planner``,
+#: so that the stored text of jobs written before it existed stays the same).
+_ONLY_WITH_VALUE = {"C0", "hrms", "source", "fft_planner"}
 #: Stored key -> attribute, where they differ.
 _ATTRIBUTE = {"length": "period"}
 
@@ -257,6 +258,7 @@ class Numerics(_Section):
     coarse: bool = True                         # coarse-grid start of each solve
     max_iterations: Optional[int] = None        # Newton steps at most, None: the solver's default
     threads: int = 1                            # FFTW threads per rank
+    fft_planner: Optional[str] = None           # FFTW planner: measure (None, the default) or patient
 
 
 _SECTIONS = (("surface", Surface), ("material", Material), ("sweep", Sweep), ("theory", Theory),

@@ -51,6 +51,7 @@ class Worker:
         self.chains = chains
         self.surface_spec = job.surface
         self.threads = job.numerics.threads
+        self.planner = job.numerics.fft_planner or "measure"
         self.setup = Setup.from_job(job, petsc_options)
         self.faults = fault_targets(cases)
         self.busy = 0.0             # s spent solving
@@ -96,7 +97,7 @@ class Worker:
         if self._fft is None or self._fft[0] != N:
             from vecontact.core.pfft import SlabFFT
             self._fft, self._surface = None, None
-            self._fft = (N, SlabFFT(group, N, threads=self.threads))
+            self._fft = (N, SlabFFT(group, N, threads=self.threads, planner=self.planner))
         return self._fft[1]
 
     def surface(self, fft, q1, seed):
