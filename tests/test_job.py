@@ -127,7 +127,8 @@ def test_fft_planner_is_optional_choice_and_not_physics():
     plain = jobs.resolve(copy.deepcopy(GOOD), ROOT)
     patient = jobs.resolve(_bad("numerics.fft_planner", "patient"), ROOT)
     assert plain.numerics.fft_planner is None and "fft_planner" not in plain.to_dict()["numerics"]
-    assert patient.numerics.fft_planner == "patient" and patient.to_dict()["numerics"]["fft_planner"] == "patient"
+    assert patient.numerics.fft_planner == "patient"
+    assert patient.to_dict()["numerics"]["fft_planner"] == "patient"
     assert jobs.physics_hash(plain) == jobs.physics_hash(patient)
     for bad in ("exhaustive", "fast", 3):
         with pytest.raises(InputError) as err:
