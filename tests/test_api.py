@@ -140,6 +140,41 @@ def test_solve_on_two_ranks(tmp_path):
     assert abs(area2 - area1) <= 1.0 / 64 ** 2 and mu2 == pytest.approx(mu1, rel=1e-6)
 
 
+def test_solve_plans_its_grid_with_the_planner_given(tmp_path, monkeypatch):
+    """fft_planner reaches the SlabFFT (default measure); patient, planned in its own process so that
+    its FFTW wisdom stays out of this one, gives the default's answer to the solver tolerance and
+    caches its wisdom under XDG_CACHE_HOME."""
+    import vecontact.core.pfft as pfft
+    made = []
+    real = pfft.SlabFFT
+    monkeypatch.setattr(pfft, "SlabFFT", lambda comm, N, **kw: made.append(kw) or real(comm, N))
+    s = vc.surface(small_job(tmp_path))
+    E = vc.modulus(**MATERIAL)
+    made.clear()
+    r = vc.solve(s, E, 0.01, 1e5)
+    assert made[0] == {"planner": "measure"}           # the solve's grid (then its float32 twin, coarse grids)
+    made.clear()
+    with pytest.warns(vc.ConvergenceWarning):
+        vc.solve(s, E, 0.01, 1e5, fft_planner="patient", max_iterations=1, coarse=False)
+    assert made[0] == {"planner": "patient"}
+    script = tmp_path / "patient.py"
+    script.write_text(
+        "import vecontact as vc\n"
+        f"job = vc.make_job(output='o.h5', surface={SURFACE!r}, material={MATERIAL!r},\n"
+        "                  sweep={'velocity': [0.01], 'pressure': [1e5]})\n"
+        "r = vc.solve(vc.surface(job), vc.modulus(**vc.REFERENCE_COMPOUND), 0.01, 1e5, fft_planner='patient')\n"
+        "print(r.area, r.mu, r.converged)\n")
+    env = dict(ENV, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, cwd=tmp_path,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    area, mu, converged = out.stdout.split()
+    # same contact set up to a point that sits on the tolerance; mu to the solver tolerance
+    assert converged == "True" and abs(float(area) - r.area) <= 1.0 / s.N ** 2
+    assert float(mu) == pytest.approx(r.mu, rel=1e-6)
+    assert list((tmp_path / "cache" / "vecontact").glob("fftw-wisdom-*.pkl"))
+
+
 def test_errors_name_the_key_in_one_line(tmp_path):
     E = vc.modulus(**MATERIAL)
     s = vc.surface(small_job(tmp_path))
@@ -156,6 +191,7 @@ def test_errors_name_the_key_in_one_line(tmp_path):
         (lambda: vc.solve(s.heights[:, :10], E, 0.01, 1e5, length=1e-5), "surface"),
         (lambda: vc.solve(s, E, 0.01, -1e5), "pressure"),
         (lambda: vc.solve(s, E, 0.01, 1e5, method="pk"), "options"),       # pk needs an elastic solid
+        (lambda: vc.solve(s, E, 0.01, 1e5, fft_planner="exhaustive"), "fft_planner"),
         (lambda: vc.self_affine(Q0, 4 * Q0, 2 * Q0, 0.8, C0=1e-28), "surface.qr"),
         (lambda: vc.run({"surface": {}}), "job"),
         (lambda: vc.load_job(tmp_path / "none.yaml"), "job"),

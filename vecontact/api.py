@@ -349,7 +349,7 @@ def theory(psd, modulus, velocity, pressure, gamma=0.5, nq=None, nphi=None):
 SOLVE_OPTIONS = ("tolerance", "method", "petsc_options", "coarse", "max_iterations", "store", "warm", "monitor")
 
 
-def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, **options):
+def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, fft_planner="measure", **options):
     """The exact steady-sliding contact of the rubber ``modulus`` on the rigid rough ``surface``.
 
     ``surface``: a :class:`Surface`, or an (N, N) array of heights in m (axis 0 = sliding
@@ -358,7 +358,10 @@ def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, **opt
     rank passes the same full surface and the ranks solve together (returned fields are each
     rank's rows). ``options``: tolerance (default 1e-8), method ("snes" or "pk", elastic only),
     petsc_options, coarse, max_iterations, store (fields to return: "pressure", "gap",
-    "displacement"), warm (a previous result on the same grid), monitor.
+    "displacement"), warm (a previous result on the same grid), monitor. ``fft_planner``: the FFTW
+    planner of the grid, "measure" (default) or "patient" (minutes of planning once per host and N,
+    cached; about 0.8x the 4096^2 FFT pair: benchmarks/RESULTS.md, "The FFTW planner"); it changes
+    rounding only, as the job key ``numerics.fft_planner`` does.
 
     Returns a :class:`vecontact.solver.ContactResult`: ``area`` (A/A0), ``mu`` (dissipation),
     ``mu_geometric``, ``mean_gap`` (m), ``converged``, ``summary()``... Warns
@@ -387,10 +390,12 @@ def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, **opt
     for k in options:
         if k not in SOLVE_OPTIONS:
             raise InputError(k, f"unknown option (allowed: {', '.join(SOLVE_OPTIONS)})")
+    if fft_planner not in jobs.FFT_PLANNERS:
+        raise InputError("fft_planner", f"must be one of {', '.join(jobs.FFT_PLANNERS)}, got {fft_planner!r}")
     comm = MPI.COMM_SELF if comm is None else comm
     N = h.shape[0]
     try:
-        fft = SlabFFT(comm, N)
+        fft = SlabFFT(comm, N, planner=fft_planner)
     except ValueError as exc:
         raise InputError("comm", str(exc)) from None
     if comm.rank == 0:
