@@ -359,9 +359,9 @@ def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, fft_p
     rank's rows). ``options``: tolerance (default 1e-8), method ("snes" or "pk", elastic only),
     petsc_options, coarse, max_iterations, store (fields to return: "pressure", "gap",
     "displacement"), warm (a previous result on the same grid), monitor. ``fft_planner``: the FFTW
-    planner of the grid, "measure" (default) or "patient" (minutes of planning once per host and N,
-    cached; about 0.8x the 4096^2 FFT pair: benchmarks/RESULTS.md, "The FFTW planner"); it changes
-    rounding only, as the job key ``numerics.fft_planner`` does.
+    planner of the grid, "measure" (default) or "patient" (faster pairs at large N for minutes of
+    planning once per host and N, cached: docs/fft.md, "Planner"); it changes rounding only, as the
+    job key ``numerics.fft_planner`` does.
 
     Returns a :class:`vecontact.solver.ContactResult`: ``area`` (A/A0), ``mu`` (dissipation),
     ``mu_geometric``, ``mean_gap`` (m), ``converged``, ``summary()``... Warns
@@ -390,8 +390,7 @@ def solve(surface, modulus, velocity, pressure, *, length=None, comm=None, fft_p
     for k in options:
         if k not in SOLVE_OPTIONS:
             raise InputError(k, f"unknown option (allowed: {', '.join(SOLVE_OPTIONS)})")
-    if fft_planner not in jobs.FFT_PLANNERS:
-        raise InputError("fft_planner", f"must be one of {', '.join(jobs.FFT_PLANNERS)}, got {fft_planner!r}")
+    jobs._choice({"fft_planner": fft_planner}, "fft_planner", "", jobs.FFT_PLANNERS)
     comm = MPI.COMM_SELF if comm is None else comm
     N = h.shape[0]
     try:
