@@ -65,6 +65,7 @@ def test_mapping_values():
     ("-contact_step_area 0.2", "renamed -vc_contact_step_area"),
     ("-snes_type vinewtonssls", "removed"),
     ("-vc_recycle_vectors 0", "removed with the Krylov recycling"),
+    ("-vc_contact_step_large_n 4096", "removed: -vc_contact_step_area_large applies by the stiffness's range"),
     ({"vc_recycle_cost": 4}, "lost in wall time"),
 ])
 def test_errors_name_the_key(value, problem):
@@ -108,10 +109,14 @@ def test_settings_check_their_ranges():
             SolverSettings(**bad)
 
 
-def test_step_area_by_grid_size():
+def test_step_area_by_stiffness_range():
+    """contact_step_area_large where the stiffness range exceeds contact_step_range_max (the paper's
+    compound: 2.9e5 at 4096^2 and 1 m/s, 5.9e5 at 2048^2 and 100 m/s, 7.3e5 at 4096^2 and 10 m/s)."""
     s = SolverSettings()
-    assert s.step_area(512) == s.step_area(2048) == s.contact_step_area == 0.3
-    assert s.step_area(4096) == s.step_area(8192) == s.contact_step_area_large == 0.2
+    assert (s.contact_step_area, s.contact_step_area_large, s.contact_step_range_max) == (0.3, 0.2, 4e5)
+    assert s.step_area(1.0) == s.step_area(2.9e5) == s.step_area(4e5) == 0.3
+    assert s.step_area(4.0001e5) == s.step_area(5.9e5) == s.step_area(7.3e5) == 0.2
+    assert SolverSettings(contact_step_range_max=1e6).step_area(7.3e5) == 0.3
 
 
 def test_restart_lengths():

@@ -154,10 +154,10 @@ def test_krylov_kernel_options_global_and_overridable():
 
 
 def test_auto_step_mode_follows_contact_area():
-    """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area(N) (0.3 up to
-    2048^2, 0.2 above), free-set steps above; both give the same solution."""
+    """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area (0.3 on this
+    grid), free-set steps above; both give the same solution."""
     from vecontact.solver.settings import SolverSettings
-    CONTACT_STEP_AREA = SolverSettings().step_area(64)
+    CONTACT_STEP_AREA = SolverSettings().contact_step_area
     N, L = 64, 1e-4
     fft = _fft(N)
     h = _random_surface(fft, L)
@@ -175,6 +175,30 @@ def test_auto_step_mode_follows_contact_area():
     forced, modes_forced = run(1e4, vc_contact_step_area=1.0)
     assert modes_forced == {"contact"}
     assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu
+
+
+def test_step_area_large_applies_by_the_operators_stiffness_range():
+    """The steps switch at contact_step_area_large (0 here: free-set steps at any area) where the
+    stiffness range, max|m_q|/min|m_q| of the solve's own operator, exceeds contact_step_range_max;
+    the solution is the same either way."""
+    from vecontact.solver.operator import ContactOperator
+    N, L, v, sigma0 = 64, 1e-4, 1.0, 300.0
+    fft = _fft(N)
+    h = _random_surface(fft, L)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    stiffness_range = ContactOperator(fft, L, mod, v, sigma0, h).stiffness_range()
+    assert 10.0 < stiffness_range < 1e6
+
+    def run(range_max):
+        r = solve_contact(fft, L, h, mod, v, sigma0, store=(), coarse=False, petsc_options=dict(
+            vc_contact_step_area_large=0.0, vc_contact_step_range_max=range_max))
+        assert r.converged, r.summary()
+        return r, {m for _, m in r.diagnostics["step_modes"]}
+
+    below, modes_below = run(1.01 * stiffness_range)
+    above, modes_above = run(0.99 * stiffness_range)
+    assert modes_below == {"contact"} and modes_above == {"free"}
+    assert abs(below.area - above.area) <= 1.0 / N ** 2 and abs(below.mu - above.mu) <= 1e-6 * above.mu
 
 
 def test_ksp_options_reach_the_free_set_steps():

@@ -130,6 +130,13 @@ class ContactOperator:
             self._stiffness_bounds = (lo, hi)
         return self._stiffness_bounds
 
+    def stiffness_range(self):
+        """max |m_q| / min |m_q| over the grid's q != 0 (collective on the first call): how far float32
+        rounding of a gap is amplified by the stiffness (single.py), and how ill-conditioned the
+        contact-set steps are (SolverSettings.step_area)."""
+        lo, hi = self.stiffness_bounds()
+        return hi / lo if hi > 0 else 1.0
+
     # ------------------------------------------------------------------ nondimensional maps
     def pressure(self, ghat, out=None):
         """p^ = 1 + m g^ + p_h (one FFT pair)."""

@@ -34,7 +34,9 @@ _RECYCLING = "removed with the Krylov recycling of the contact-set steps (it los
 RETIRED = {
     ("contact_step", None): f"renamed -{PREFIX}contact_step",
     ("contact_step_area", None): f"renamed -{PREFIX}contact_step_area (-{PREFIX}contact_step_area_large "
-                                 f"above -{PREFIX}contact_step_large_n)",
+                                 f"above -{PREFIX}contact_step_range_max)",
+    (f"{PREFIX}contact_step_large_n", None): f"removed: -{PREFIX}contact_step_area_large applies by the "
+                                             f"stiffness's range, -{PREFIX}contact_step_range_max",
     ("snes_type", "vinewtonssls"): "removed (it did not converge with the compliance preconditioner); "
                                    "use the default newtonls or vinewtonrsls",
     (f"{PREFIX}recycle_vectors", None): _RECYCLING,

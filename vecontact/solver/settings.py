@@ -61,11 +61,11 @@ class SolverSettings:
     # --- where a Newton step is solved: on the contact set or on the free set
     contact_step: str = _knob("auto", "auto (by contact_step_area), contact or free (free-set steps)",
                               choices=("auto", "contact", "free"))
-    contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 (N <= ..._large_n) [RESULTS.md]",
-                                     lo=0, hi=1)
-    contact_step_area_large: float = _knob(0.2, "auto: the same on grids N > contact_step_large_n [RESULTS.md]",
-                                           lo=0, hi=1)
-    contact_step_large_n: int = _knob(2048, "grid size above which contact_step_area_large applies", lo=0)
+    contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 [RESULTS.md]", lo=0, hi=1)
+    contact_step_area_large: float = _knob(0.2, "auto: the same where max|m_q|/min|m_q| > contact_step_range_max "
+                                           "[RESULTS.md]", lo=0, hi=1)
+    contact_step_range_max: float = _knob(4e5, "stiffness range above which contact_step_area_large applies "
+                                          "[RESULTS.md]", lo=0)
     # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
     restart_max: int = _knob(120, "GMRES restart of the free-set steps (-ksp_gmres_restart wins) [RESULTS.md]",
                              lo=1)
@@ -120,9 +120,13 @@ class SolverSettings:
             raise ValueError(f"bearing_area_min {self.bearing_area_min} > bearing_area_max {self.bearing_area_max}")
 
     # ------------------------------------------------------------------ derived values
-    def step_area(self, N):
-        """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set (N x N grid)."""
-        return self.contact_step_area if N <= self.contact_step_large_n else self.contact_step_area_large
+    def step_area(self, stiffness_range):
+        """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set of a grid whose
+        stiffness has the range max|m_q|/min|m_q| (ContactOperator.stiffness_range; it grows with N
+        and with the speed): at high range the contact set wanders between the steps solved on it."""
+        if stiffness_range > self.contact_step_range_max:
+            return self.contact_step_area_large
+        return self.contact_step_area
 
     def restart(self, n_local, vectors=1, reserve=0):
         """GMRES restart of the free-set steps (n_local: local free points; GMRES: 1 basis vector an

@@ -109,7 +109,8 @@ class _Semismooth:
         st.ensure(st.view(X))
         change = st.update_active_set()
         self.lin_history.append(self.linear_iterations(snes))
-        mode = choose_step(self.settings.contact_step, st.nact, st.n_points, self.settings.step_area(st.op.N))
+        mode = choose_step(self.settings.contact_step, st.nact, st.n_points,
+                           self.settings.step_area(st.op.stiffness_range()))
         step = self.steps[mode]
         if mode != self.mode:
             step.activate(self.ksp)

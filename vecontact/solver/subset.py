@@ -296,13 +296,13 @@ class SubsetStep:
     def float32_pc(self):
         """Whether a preconditioner of a flexible method (FGMRES), which may round more than the
         operator, runs float32 pairs: the stiffness's range at most SolverSettings.pc_range_max."""
-        return self.stiffness_range() <= self.settings.pc_range_max
+        return self.op.stiffness_range() <= self.settings.pc_range_max
 
     def single_context(self):
         """The step's _Single (made on first use; its pairs in float32 by the stiffness's range, and on
         the contact set, whose float32 steps are flexible, its preconditioner's by float32_pc)."""
         if self._single is None:
-            self.float32_pairs = self.stiffness_range() <= self.settings.single_range_max
+            self.float32_pairs = self.op.stiffness_range() <= self.settings.single_range_max
             self._single = _Single(self, self.float32_pairs, self.mode == "contact" and self.float32_pc())
         return self._single
 
@@ -346,12 +346,6 @@ class SubsetStep:
             its *= k
         self.iterations += its
         self.single_iterations += its
-
-    def stiffness_range(self):
-        """max |m_q| / min |m_q| over the grid's q != 0: how far float32 rounding of a gap is amplified
-        by the stiffness (single.py)."""
-        lo, hi = self.op.stiffness_bounds()
-        return hi / lo if hi > 0 else 1.0
 
     def release(self):
         """Destroy the inner KSP and its operators; remove the option defaults this step put in."""
