@@ -153,26 +153,33 @@ def test_krylov_kernel_options_global_and_overridable():
                 opts[k] = v
 
 
+def _step_mode_problem():
+    """The 64^2 problem of the step-mode tests: (fft, L, h, modulus, velocity)."""
+    fft = _fft(64)
+    L = 1e-4
+    return fft, L, _random_surface(fft, L), HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5), 1.0
+
+
+def _solve_step_modes(problem, sigma0, **opts):
+    """A converged single-grid solve of ``problem`` and the set of its Newton steps' modes."""
+    fft, L, h, mod, v = problem
+    r = solve_contact(fft, L, h, mod, v, sigma0, store=(), coarse=False, petsc_options=opts or None)
+    assert r.converged, r.summary()
+    return r, {m for _, m in r.diagnostics["step_modes"]}
+
+
 def test_auto_step_mode_follows_contact_area():
     """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area (0.3 on this
     grid), free-set steps above; both give the same solution."""
     from vecontact.solver.settings import SolverSettings
     CONTACT_STEP_AREA = SolverSettings().contact_step_area
-    N, L = 64, 1e-4
-    fft = _fft(N)
-    h = _random_surface(fft, L)
-    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
-
-    def run(sigma0, **opts):
-        r = solve_contact(fft, L, h, mod, 1.0, sigma0, store=(), coarse=False, petsc_options=opts or None)
-        assert r.converged, r.summary()
-        return r, {m for _, m in r.diagnostics["step_modes"]}
-
-    low, modes_low = run(300.0)
-    high, modes_high = run(1e4)
+    problem = _step_mode_problem()
+    N = problem[0].N
+    low, modes_low = _solve_step_modes(problem, 300.0)
+    high, modes_high = _solve_step_modes(problem, 1e4)
     assert low.area < CONTACT_STEP_AREA < high.area, (low.area, high.area)
     assert modes_low == {"contact"} and modes_high == {"free"}
-    forced, modes_forced = run(1e4, vc_contact_step_area=1.0)
+    forced, modes_forced = _solve_step_modes(problem, 1e4, vc_contact_step_area=1.0)
     assert modes_forced == {"contact"}
     assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu
 
@@ -182,18 +189,15 @@ def test_step_area_large_applies_by_the_operators_stiffness_range():
     stiffness range, max|m_q|/min|m_q| of the solve's own operator, exceeds contact_step_range_max;
     the solution is the same either way."""
     from vecontact.solver.operator import ContactOperator
-    N, L, v, sigma0 = 64, 1e-4, 1.0, 300.0
-    fft = _fft(N)
-    h = _random_surface(fft, L)
-    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    problem = _step_mode_problem()
+    fft, L, h, mod, v = problem
+    N, sigma0 = fft.N, 300.0
     stiffness_range = ContactOperator(fft, L, mod, v, sigma0, h).stiffness_range()
     assert 10.0 < stiffness_range < 1e6
 
     def run(range_max):
-        r = solve_contact(fft, L, h, mod, v, sigma0, store=(), coarse=False, petsc_options=dict(
-            vc_contact_step_area_large=0.0, vc_contact_step_range_max=range_max))
-        assert r.converged, r.summary()
-        return r, {m for _, m in r.diagnostics["step_modes"]}
+        return _solve_step_modes(problem, sigma0, vc_contact_step_area_large=0.0,
+                                 vc_contact_step_range_max=range_max)
 
     below, modes_below = run(1.01 * stiffness_range)
     above, modes_above = run(0.99 * stiffness_range)
