@@ -34,6 +34,22 @@ def test_summary_without_blas(bench):
     assert out["pairs_growth"] == pytest.approx(200.0 / 80.0, rel=1e-12)
 
 
+def test_overhead_counts_only_converged_oracles(bench):
+    """An oracle stopped at its cap gives an upper bound on the overhead, listed apart; --no-oracle gives
+    none; neither touches all_converged, which is about the solves of the cases."""
+    capped = dict(_snes(2048, 10, 0.6, 400.0, 8.0, 0.02, 1.1, None), oracle_converged=False)
+    skipped = dict(_snes(1024, 0.01, 0.05, 90.0, 1.0, 0.01, None, None), oracle_converged=None)
+    out = bench.summarise([_snes(1024, 10, 0.05, 100.0, 3.0, 0.02, 2.5, None), capped, skipped])
+    assert out["overhead_max"] == 2.5 and out["overhead_cases"] == "1 of 3"
+    assert out["overhead_bounds"] == [dict(N=2048, v=10, target=0.6, overhead_below=1.1)]
+    assert out["all_converged"] is True
+    out = bench.summarise([skipped])
+    assert out["overhead_max"] is None and out["overhead_bounds"] == []
+    not_run = dict(skipped, oracle_iterations=None, oracle_pairs=None)
+    assert bench._oracle_text(not_run) == " oracle not run, overhead n/a"
+    assert "upper bound" in bench._oracle_text(dict(capped, oracle_iterations=2000, oracle_pairs=364.0))
+
+
 def test_summary_compares_blas_side_by_side(bench, capsys):
     lib = "/opt/openblas"
     recs = [dict(kind="fft", N=2048, t_pair=0.04, blas="reference"),
