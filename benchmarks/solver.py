@@ -131,7 +131,7 @@ def worker(args):
     for area in args.areas:
         for v in args.velocities:
             sig = calibrate(hn, v, area)
-            runs = []                     # (seconds, seconds inside SlabFFT.apply) of each repeat
+            runs = []                     # (seconds, seconds inside SlabFFT.apply, FFT pairs) per repeat
             for _ in range(args.repeat):
                 s0 = apply_seconds()
                 r = solve_contact(fft, L, h, hn, v, sig, tolerance=args.tol, store=("pressure",),
