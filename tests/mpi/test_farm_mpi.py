@@ -8,6 +8,7 @@ import traceback
 import numpy as np
 import pytest
 import yaml
+from mpi4py import MPI
 
 from vecontact import job as jobs
 from vecontact.io.results import read_cases
@@ -89,3 +90,20 @@ def test_farm_resumes_a_partial_file(comm, shared_dir):
         np.testing.assert_array_equal(full[k], again[k])
     np.testing.assert_allclose(full["area"], again["area"], atol=2.5 / 64 ** 2)
     np.testing.assert_allclose(full["mu"], again["mu"], rtol=1e-5, atol=1e-6)
+
+
+def test_memory_per_rank_is_one_value(comm):
+    """``auto`` by memory: every rank gets the same share (the rule must not differ between ranks),
+    here the node's available memory over the ranks on it (one node)."""
+    from vecontact.farm.memory import memory_per_rank, node_available
+    got = memory_per_rank(comm)
+    everyone = comm.allgather(got)
+    assert all(v == everyone[0] for v in everyone)      # the same object's value, by contract
+    avail = node_available()
+    if avail is None:
+        assert got is None
+    else:
+        node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+        size = node.size
+        node.Free()
+        assert got == pytest.approx(avail / size, rel=0.2)

@@ -13,6 +13,7 @@ Layers, one module each:
 * :mod:`~vecontact.farm.case`: one case solved and turned into its row (and fields file);
 * :mod:`~vecontact.farm.interrupt`: Ctrl-C and SIGTERM (rank 0 commits and ends the job);
 * :mod:`~vecontact.farm.progress`: the start line, progress lines with ETA, the summary;
+* :mod:`~vecontact.farm.memory`: a node's available memory and a case's peak (``ranks_per_case: auto``);
 * :mod:`~vecontact.farm.run`: :func:`run_numerics`, which puts them together.
 """
 from vecontact.farm.case import gather_rows

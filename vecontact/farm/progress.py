@@ -97,12 +97,17 @@ class Progress:
                 f"  ETA {hms(self.eta())}{flag}")
 
 
-def start_line(ncases, ndone, nsolve, nchains, nranks, ranks_per_case, rule, threaded):
+def start_line(ncases, ndone, nsolve, nchains, nranks, ranks_per_case, rule, threaded, memory=None):
     """The run's first line. ``rule``: {N: ranks per case}; ``threaded``: the coordinator is a
-    thread on rank 0 (else rank 0 only coordinates)."""
+    thread on rank 0 (else rank 0 only coordinates); ``memory``: the bytes a rank may use that
+    ``auto`` went by (None: unknown, the grid rule)."""
     rules = ", ".join(f"N={N}: {g}" for N, g in sorted(rule.items()))
+    how = str(ranks_per_case)
+    if ranks_per_case == "auto":
+        how += (f" by memory, {memory / 1e9:.1f} GB a rank" if memory is not None
+                else " by grid, the node's memory unknown")
     return (f"farm: {ncases} cases, {ndone} already finished, {nsolve} to solve "
-            f"in {nchains} chains on {nranks} ranks (ranks per case, {ranks_per_case}: {rules}; "
+            f"in {nchains} chains on {nranks} ranks (ranks per case, {how}: {rules}; "
             f"coordinator {'thread on rank 0' if threaded else 'on rank 0 (dedicated)'})")
 
 

@@ -13,7 +13,8 @@ from mpi4py import MPI
 
 from vecontact.farm import progress
 from vecontact.farm.interrupt import Interruptible
-from vecontact.farm.schedule import Coordinator, build_chains, ranks_for_grid
+from vecontact.farm.memory import memory_per_rank
+from vecontact.farm.schedule import Coordinator, build_chains
 from vecontact.farm.transport import Hub, Link, abort, wait
 from vecontact.farm.worker import Worker
 
@@ -74,7 +75,8 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     threaded = size == 1 or MPI.Query_thread() >= MPI.THREAD_MULTIPLE
     nwork = size if threaded else size - 1
     Ns = {q1: job.surface.grid(q1) for q1 in psds}
-    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case)
+    memory = memory_per_rank(comm) if num.ranks_per_case == "auto" else None
+    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case, memory)
     _init_petsc(job)
     ctl = comm.Dup()
     fin = comm.Dup()
@@ -85,9 +87,9 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
         coord = Coordinator(chains, cases, writer, ndone=ndone, progress=report)
         hub = Hub(coord, ctl, comm)
         if not quiet:
-            rule = {N: ranks_for_grid(N, nwork, num.ranks_per_case) for N in set(Ns.values())}
+            rule = {ch.N: ch.g for ch in chains}
             print(progress.start_line(len(cases), ndone, int(todo.sum()), len(chains), size,
-                                      num.ranks_per_case, rule, threaded), flush=True)
+                                      num.ranks_per_case, rule, threaded, memory), flush=True)
     worker = Worker(job, comm, Link(comm, ctl, hub), cases, rows, psds, Ns, chains, options)
     with Interruptible(hub):     # Ctrl-C, SIGTERM: rank 0 commits and ends the job
         try:

@@ -9,13 +9,15 @@ from the previous one. A chain (or a piece of one) is the unit of work. Cases at
 Groups
 ------
 ``COMM_WORLD`` is split into groups; a group solves one case at a time on all its ranks (slab FFT).
-The ranks a case needs, g(N), come from ``numerics.ranks_per_case`` or, with ``auto``, from the grid:
-g = 1 up to N = 1024 and beyond that the smallest power of two keeping <= 1024^2 grid points per rank
-(N = 2048 -> 4, 4096 -> 16, 8192 -> 64); never more than N/2 (the slab FFT's limit) nor than the
-ranks available. The farm starts with one group of all ranks; a group handed work that needs fewer
-ranks splits itself (``Comm.Split``, local to the group) into floor(G/g) groups. Work is handed
-out largest first (g, then N, then chain length), so group sizes only ever shrink and the largest
-grids never start last.
+The ranks a case needs, g(N), come from ``numerics.ranks_per_case`` or, with ``auto``, from memory:
+the smallest power of two whose share of the case (memory.case_bytes) fits in MEMORY_USE of a rank's
+share of its node (memory.memory_per_rank; 4096^2 -> 1 with 11 GB a rank, 8 with 4 GB, 16 with 3).
+Where the node's memory is unknown, from the grid: g = 1 up to N = 1024 and beyond that the smallest
+power of two keeping <= 1024^2 grid points per rank (N = 2048 -> 4, 4096 -> 16, 8192 -> 64). Never
+more than N/2 (the slab FFT's limit) nor than the ranks available. The farm starts with one group
+of all ranks; a group handed work that needs fewer ranks splits itself (``Comm.Split``, local to the
+group) into floor(G/g) groups. Work is handed out largest first (g, then N, then chain length), so
+group sizes only ever shrink and the largest grids never start last.
 
 Messages
 --------
@@ -40,6 +42,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Optional
 
+from vecontact.farm.memory import MEMORY_USE, case_bytes
 from vecontact.rows import CONVERGED, REASON
 
 AUTO_POINTS_PER_RANK = 1024 * 1024
@@ -76,11 +79,16 @@ class Finished(NamedTuple):
 
 # ------------------------------------------------------------------------------------------------
 # rules
-def ranks_for_grid(N, nranks, ranks_per_case="auto"):
-    """Ranks per case for an N x N grid with ``nranks`` ranks available (see the module doc)."""
+def ranks_for_grid(N, nranks, ranks_per_case="auto", memory=None):
+    """Ranks per case for an N x N grid with ``nranks`` ranks available (see the module doc);
+    ``memory``: bytes a rank may use (memory.memory_per_rank), None where unknown."""
     N = int(N)
     cap = max(1, min(N // 2, int(nranks)))
-    if ranks_per_case == "auto":
+    if ranks_per_case == "auto" and memory is not None:
+        g = 1
+        while g < cap and case_bytes(N, g) > MEMORY_USE * memory:
+            g *= 2
+    elif ranks_per_case == "auto":
         need = N * N / AUTO_POINTS_PER_RANK
         g = 1 if need <= 1 else 2 ** math.ceil(math.log2(need) - 1e-12)
     else:
@@ -120,8 +128,9 @@ class Chain:
         return len(self.cases) * case_weight(self.N)
 
 
-def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto"):
-    """Chains of the unfinished cases (``todo``: booleans), ordered largest first."""
+def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=None):
+    """Chains of the unfinished cases (``todo``: booleans), ordered largest first; ``memory`` as in
+    ranks_for_grid."""
     by_key = {}
     for i, c in enumerate(cases):
         if todo[i]:
@@ -130,7 +139,7 @@ def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto"):
     for key, idx in by_key.items():
         idx.sort(key=lambda i: cases[i].pressure)
         N = grid_of(key[0])
-        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case)))
+        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case, memory)))
     chains.sort(key=lambda ch: (-ch.g, -ch.N, -len(ch.cases), ch.key))
     for k, ch in enumerate(chains):
         ch.cid = k

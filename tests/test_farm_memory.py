@@ -1,0 +1,118 @@
+"""``ranks_per_case: auto`` by memory (vecontact.farm.memory, schedule.ranks_for_grid): the case's
+estimate against the measured peaks, the node's available memory from fake /proc and cgroup trees,
+and the rule it gives."""
+import os
+
+import pytest
+from mpi4py import MPI
+
+from vecontact.farm import memory, progress, schedule
+from vecontact.solver.settings import SolverSettings
+
+GB = 1e9
+
+
+def test_case_bytes_covers_the_measured_peaks():
+    # peak RSS per rank at 4096^2 (benchmarks/RESULTS.md, "One rank per case at 4096²"): the estimate
+    # is an upper bound of each, and not a loose one (within 30 % of the largest)
+    peaks = {1: 9.50 * GB, 2: 6.22 * GB}
+    for g, peak in peaks.items():
+        est = memory.case_bytes(4096, g)
+        assert peak <= est <= 1.3 * peak, (g, est)
+    # the basis term follows the settings' budget and is capped by the restart where that binds
+    small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
+    assert memory.case_bytes(4096, 1) - memory.case_bytes(4096, 1, small) == pytest.approx(
+        memory.KRYLOV_PEAK * 2e9, rel=1e-12)
+    n = 256 * 256
+    assert memory.case_bytes(256, 1) == pytest.approx(
+        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 121 * n, rel=1e-12)
+
+
+def test_auto_by_memory():
+    auto = schedule.ranks_for_grid
+    # the 2-core development machine: 22 GB available, 11 GB a rank -> one rank per 4096^2 case
+    assert [auto(N, 2, "auto", 11 * GB) for N in (512, 1024, 2048, 4096)] == [1, 1, 1, 1]
+    # a cluster node with 4 GB a core, and one with 2 GB (the grid rule's choice there)
+    assert [auto(N, 4096, "auto", 4 * GB) for N in (1024, 2048, 4096, 8192)] == [1, 2, 8, 32]
+    assert [auto(N, 4096, "auto", 2 * GB) for N in (1024, 2048, 4096, 8192)] == [1, 4, 16, 64]
+    # every choice fits, and half of it would not
+    for mem in (2 * GB, 4 * GB, 8 * GB):
+        for N in (2048, 4096, 8192):
+            g = auto(N, 4096, "auto", mem)
+            assert memory.case_bytes(N, g) <= memory.MEMORY_USE * mem
+            assert g == 1 or memory.case_bytes(N, g // 2) > memory.MEMORY_USE * mem
+    # capped by the ranks available and N/2; an explicit number ignores the memory
+    assert auto(4096, 2, "auto", 1 * GB) == 2
+    assert auto(8, 100, "auto", 1e3) == 4
+    assert auto(4096, 64, 3, 1 * GB) == 3
+    # memory unknown: the grid rule
+    assert [auto(N, 4096, "auto", None) for N in (1024, 2048, 4096)] == [1, 4, 16]
+
+
+def test_build_chains_passes_memory():
+    from vecontact.cases import Case
+    cases = [Case(1e6, 1, 1.0, p) for p in (1.0, 2.0)]
+    todo = [True, True]
+    [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 2, "auto", 11 * GB)
+    assert ch.g == 1
+    [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 2, "auto")
+    assert ch.g == 2
+
+
+def _write(path, text):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as fh:
+        fh.write(text)
+
+
+def _meminfo(tmp_path, kib):
+    p = tmp_path / "meminfo"
+    p.write_text(f"MemTotal:       24000000 kB\nMemFree:  1000 kB\nMemAvailable:   {kib} kB\n")
+    return str(p)
+
+
+def test_node_available_cgroup_v2_limit_on_an_ancestor(tmp_path):
+    root = str(tmp_path / "cg")
+    _write(os.path.join(root, "job", "memory.max"), str(8 * 2 ** 30))
+    _write(os.path.join(root, "job", "memory.current"), str(2 ** 30))
+    _write(os.path.join(root, "job", "step", "memory.max"), "max")
+    _write(os.path.join(root, "job", "step", "memory.current"), "0")
+    cg = tmp_path / "self_cgroup"
+    cg.write_text("0::/job/step\n")
+    got = memory.node_available(_meminfo(tmp_path, 20 * 2 ** 20), str(cg), root)
+    assert got == 7 * 2 ** 30                    # the job's 8 GiB less its 1 GiB, under 20 GiB free
+
+
+def test_node_available_cgroup_v1_and_unlimited(tmp_path):
+    root = str(tmp_path / "cg")
+    d = os.path.join(root, "memory", "slurm", "job_7")
+    _write(os.path.join(d, "memory.limit_in_bytes"), str(6 * 2 ** 30))
+    _write(os.path.join(d, "memory.usage_in_bytes"), str(2 ** 30))
+    _write(os.path.join(root, "memory", "memory.limit_in_bytes"), "9223372036854771712")
+    _write(os.path.join(root, "memory", "memory.usage_in_bytes"), str(10 * 2 ** 30))
+    cg = tmp_path / "self_cgroup"
+    cg.write_text("5:cpu:/\n4:memory:/slurm/job_7\n0::/\n")
+    assert memory.node_available(_meminfo(tmp_path, 20 * 2 ** 20), str(cg), root) == 5 * 2 ** 30
+    # no limit anywhere (this machine's kind): MemAvailable
+    cg.write_text("4:memory:/\n0::/\n")
+    assert memory.node_available(_meminfo(tmp_path, 3 * 2 ** 20), str(cg), root) == 3 * 2 ** 30
+    # no cgroup file: MemAvailable; no MemAvailable: unknown
+    assert memory.node_available(_meminfo(tmp_path, 2 ** 20), str(tmp_path / "none"), root) == 2 ** 30
+    assert memory.node_available(str(tmp_path / "none"), str(cg), root) is None
+
+
+def test_memory_per_rank_one_rank():
+    avail = memory.node_available()
+    got = memory.memory_per_rank(MPI.COMM_SELF)
+    if avail is None:
+        assert got is None
+    else:                                        # read twice: the node's memory moves a little
+        assert got == pytest.approx(avail, rel=0.2)
+
+
+def test_start_line_names_the_rule():
+    line = progress.start_line(4, 0, 4, 1, 2, "auto", {4096: 1}, True, 11.04e9)
+    assert "ranks per case, auto by memory, 11.0 GB a rank: N=4096: 1;" in line
+    line = progress.start_line(4, 0, 4, 1, 2, "auto", {4096: 2}, True, None)
+    assert "auto by grid, the node's memory unknown: N=4096: 2;" in line
+    assert "ranks per case, 2: N=4096: 2;" in progress.start_line(4, 0, 4, 1, 2, 2, {4096: 2}, True)

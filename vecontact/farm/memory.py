@@ -1,0 +1,118 @@
+"""Memory, for ``numerics.ranks_per_case: auto``: what a rank may use on its node, what a case needs.
+
+auto gives a grid the fewest ranks per case (a power of two) whose share of the case fits in one
+rank's share of its node: a one-rank case does no transposes, and at 4096² two one-rank cases at
+once cost 0.60-0.77x the core-seconds of the same cases on two ranks (benchmarks/RESULTS.md, "One
+rank per case at 4096²").  Where the node's memory cannot be read, auto falls back to the grid rule
+(schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
+
+Sizes are bytes.  The node's memory is Linux's MemAvailable, capped by the job's cgroup (v2
+``memory.max`` less ``memory.current``, v1 ``memory.limit_in_bytes`` less ``memory.usage_in_bytes``,
+on the process's group and its ancestors: what a batch scheduler grants).
+"""
+import os
+
+from vecontact.solver.settings import SolverSettings
+
+__all__ = ["case_bytes", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
+
+# the solver's arrays per grid point of a case: 5.9 GB peak at 4096² on 1 rank with a small basis [RESULTS.md]
+BYTES_PER_POINT = 360
+# peak Krylov memory over its budget: 9.5 GB at 4096², 10 m/s, 27 % on 1 rank, 6.2 GB a rank on 2 [RESULTS.md]
+KRYLOV_PEAK = 1.2
+# the part of a rank's share auto lets a case fill (the rest: the system, the farm, MPI's buffers)
+MEMORY_USE = 0.9
+
+_UNLIMITED = 2 ** 60
+
+
+def case_bytes(N, g, settings=None):
+    """Peak bytes per rank of an N x N case on ``g`` ranks: the arrays, and the largest Krylov basis
+    the ``settings`` allow (default SolverSettings: 3 GB a rank, fewer where the restart caps bind)."""
+    s = SolverSettings() if settings is None else settings
+    points = float(N) * float(N) / max(1, int(g))
+    budget = max(s.restart_memory, s.inner_restart_memory)
+    basis = min(budget, 8.0 * (max(s.restart_max, s.inner_restart_max) + 1) * points)
+    return BYTES_PER_POINT * points + KRYLOV_PEAK * basis
+
+
+def _read_int(path):
+    try:
+        with open(path) as fh:
+            text = fh.read().strip()
+    except OSError:
+        return None
+    if text == "max":
+        return _UNLIMITED
+    try:
+        return int(text)
+    except ValueError:
+        return None
+
+
+def _mem_available(meminfo):
+    try:
+        with open(meminfo) as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _cgroup_room(proc_cgroup, cgroup_root):
+    """The least room (limit less usage) over the process's memory cgroup and its ancestors, or None
+    where no limit is set or nothing can be read."""
+    try:
+        with open(proc_cgroup) as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return None
+    places = []
+    for line in lines:
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        hid, controllers, path = parts
+        if hid == "0" and controllers == "":
+            places.append((cgroup_root, path, "memory.max", "memory.current"))
+        elif "memory" in controllers.split(","):
+            places.append((os.path.join(cgroup_root, "memory"), path, "memory.limit_in_bytes",
+                           "memory.usage_in_bytes"))
+    room = None
+    for root, path, limit_name, usage_name in places:
+        rel = path.strip("/")
+        while True:
+            d = os.path.join(root, rel) if rel else root
+            limit, usage = _read_int(os.path.join(d, limit_name)), _read_int(os.path.join(d, usage_name))
+            if limit is not None and usage is not None and limit < _UNLIMITED:
+                room = limit - usage if room is None else min(room, limit - usage)
+            if not rel:
+                break
+            rel = os.path.dirname(rel)
+    return room
+
+
+def node_available(meminfo="/proc/meminfo", proc_cgroup="/proc/self/cgroup", cgroup_root="/sys/fs/cgroup"):
+    """Bytes this node can still give the job (see the module doc), or None where MemAvailable cannot
+    be read (not Linux)."""
+    avail = _mem_available(meminfo)
+    if avail is None:
+        return None
+    room = _cgroup_room(proc_cgroup, cgroup_root)
+    return max(0, avail if room is None else min(avail, room))
+
+
+def memory_per_rank(comm):
+    """The least share of a node's available memory per rank over the nodes of ``comm`` (collective:
+    every rank gets the same value), or None where a node's memory cannot be read."""
+    from mpi4py import MPI
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    try:
+        avail = node.bcast(node_available() if node.rank == 0 else None, root=0)
+        share = None if avail is None else avail / node.size
+    finally:
+        node.Free()
+    shares = comm.allgather(share)
+    return None if any(s is None for s in shares) else min(shares)
