@@ -19,13 +19,23 @@ def test_case_bytes_covers_the_measured_peaks():
     for g, peak in peaks.items():
         est = memory.case_bytes(4096, g)
         assert peak <= est <= 1.3 * peak, (g, est)
-    # the basis term follows the settings' budget and is capped by the restart where that binds
+    # the basis term is the restart rules' largest basis (SolverSettings.restart, inner_restart): the
+    # 3 GB budget where it binds (4096^2 on one rank), floored to whole FGMRES iterations
+    n = 4096 ** 2
+    basis = (memory.case_bytes(4096, 1) - memory.BYTES_PER_POINT * n) / memory.KRYLOV_PEAK
+    assert 3e9 - 2 * 8 * 0.3 * n <= basis <= 3e9
+    # a small budget: restart_min binds, the free-set GMRES holds 11 whole-grid vectors (1.5 GB)
     small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
-    assert memory.case_bytes(4096, 1) - memory.case_bytes(4096, 1, small) == pytest.approx(
-        memory.KRYLOV_PEAK * 2e9, rel=1e-12)
+    basis = (memory.case_bytes(4096, 1, small) - memory.BYTES_PER_POINT * n) / memory.KRYLOV_PEAK
+    assert basis == pytest.approx(8 * (small.restart_min + 1) * n, rel=1e-12)
+    # a small grid: the caps bind, the free-set GMRES's 121 vectors on every point outweigh the inner
+    # FGMRES's 2 x 101 on the 30 % of them solved on the contact set; with contact-set steps
+    # everywhere the inner FGMRES holds 2 x 101 whole-grid vectors
     n = 256 * 256
     assert memory.case_bytes(256, 1) == pytest.approx(
         memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 121 * n, rel=1e-12)
+    assert memory.case_bytes(256, 1, SolverSettings(contact_step="contact")) == pytest.approx(
+        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 202 * n, rel=1e-12)
 
 
 def test_auto_by_memory():
@@ -49,6 +59,22 @@ def test_auto_by_memory():
     assert [auto(N, 4096, "auto", None) for N in (1024, 2048, 4096)] == [1, 4, 16]
 
 
+def test_auto_fills_the_ranks():
+    auto = schedule.ranks_for_grid
+    # one 4096^2 case on 2 ranks with room for it on one: both ranks (jobs/paper-maps.yaml)
+    assert auto(4096, 2, "auto", 11 * GB, count=1) == 2
+    assert auto(4096, 2, "auto", 11 * GB, count=48) == 1
+    # ranks / cases, as a power of two: 12 cases on 64 ranks get 4 each
+    assert auto(4096, 64, "auto", 11 * GB, count=12) == 4
+    # never above the grid rule (1 up to 1024^2, then 1024^2 points a rank), never below memory's g
+    assert auto(64, 64, "auto", 11 * GB, count=8) == 1
+    assert auto(2048, 64, "auto", 11 * GB, count=1) == 4
+    assert auto(4096, 64, "auto", 3 * GB, count=12) == 16
+    # the grid rule and a fixed number ignore the count
+    assert auto(4096, 64, "auto", None, count=1) == 16
+    assert auto(4096, 64, 2, 11 * GB, count=1) == 2
+
+
 def test_build_chains_passes_memory():
     from vecontact.cases import Case
     cases = [Case(1e6, 1, 1.0, p) for p in (1.0, 2.0)]
@@ -57,6 +83,15 @@ def test_build_chains_passes_memory():
     assert ch.g == 1
     [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 2, "auto")
     assert ch.g == 2
+    # the count is the grid's unfinished cases: with one left, both ranks
+    [ch] = schedule.build_chains(cases, [False, True], lambda q1: 4096, 2, "auto", 11 * GB)
+    assert ch.g == 2
+    # the job's Krylov budgets enter the estimate: 1 GB bases let a 4096^2 case fit on half the ranks
+    small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
+    [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 8, "auto", 4 * GB)
+    assert ch.g == 8
+    [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 8, "auto", 4 * GB, small)
+    assert ch.g == 4
 
 
 def _write(path, text):

@@ -1,9 +1,9 @@
 """Memory, for ``numerics.ranks_per_case: auto``: what a rank may use on its node, what a case needs.
 
 auto gives a grid the fewest ranks per case (a power of two) whose share of the case fits in one
-rank's share of its node: a one-rank case does no transposes, and at 4096² two one-rank cases at
-once cost 0.60-0.77x the core-seconds of the same cases on two ranks (benchmarks/RESULTS.md, "One
-rank per case at 4096²").  Where the node's memory cannot be read, auto falls back to the grid rule
+rank's share of its node: a one-rank case does no transposes, and two one-rank cases at once cost
+0.60-0.77x (4096²) and 0.58-0.63x (2048²) the core-seconds of the same cases on two ranks
+(benchmarks/RESULTS.md, "One rank per case at 4096²").  Where the node's memory cannot be read, auto falls back to the grid rule
 (schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
 
 Sizes are bytes.  The node's memory is Linux's MemAvailable, capped by the job's cgroup (v2
@@ -27,13 +27,18 @@ _UNLIMITED = 2 ** 60
 
 
 def case_bytes(N, g, settings=None):
-    """Peak bytes per rank of an N x N case on ``g`` ranks: the arrays, and the largest Krylov basis
-    the ``settings`` allow (default SolverSettings: 3 GB a rank, fewer where the restart caps bind)."""
+    """Peak bytes per rank of an N x N case on ``g`` ranks: the arrays, and the largest Krylov basis the
+    ``settings``' restart rules give a step: a free-set GMRES over all of a rank's points, or the
+    contact-set steps' inner FGMRES (two vectors an iteration) over the largest contact set solved on
+    (contact_step_area; all points with contact_step "contact").  That is their budgets (3 GB a rank
+    by default), less where the restart caps bind, more where ``restart_min`` does."""
     s = SolverSettings() if settings is None else settings
-    points = float(N) * float(N) / max(1, int(g))
-    budget = max(s.restart_memory, s.inner_restart_memory)
-    basis = min(budget, 8.0 * (max(s.restart_max, s.inner_restart_max) + 1) * points)
-    return BYTES_PER_POINT * points + KRYLOV_PEAK * basis
+    n = float(N) * float(N) / max(1, int(g))
+    area = {"contact": 1.0, "free": 0.0}.get(s.contact_step, max(s.contact_step_area, s.contact_step_area_large))
+    n_contact = area * n
+    free = (s.restart(n) + 1) * n
+    inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact if n_contact > 0 else 0.0
+    return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner)
 
 
 def _read_int(path):

@@ -17,6 +17,7 @@ from vecontact.farm.memory import memory_per_rank
 from vecontact.farm.schedule import Coordinator, build_chains
 from vecontact.farm.transport import Hub, Link, abort, wait
 from vecontact.farm.worker import Worker
+from vecontact.solver.settings import SolverSettings
 
 
 def petsc_options(job, petsc_args):
@@ -76,7 +77,8 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     nwork = size if threaded else size - 1
     Ns = {q1: job.surface.grid(q1) for q1 in psds}
     memory = memory_per_rank(comm) if num.ranks_per_case == "auto" else None
-    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case, memory)
+    settings = SolverSettings().with_options(options)   # checked by petsc_options: -vc_ budgets
+    chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case, memory, settings)
     _init_petsc(job)
     ctl = comm.Dup()
     fin = comm.Dup()

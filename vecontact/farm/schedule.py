@@ -11,7 +11,8 @@ Groups
 ``COMM_WORLD`` is split into groups; a group solves one case at a time on all its ranks (slab FFT).
 The ranks a case needs, g(N), come from ``numerics.ranks_per_case`` or, with ``auto``, from memory:
 the smallest power of two whose share of the case (memory.case_bytes) fits in MEMORY_USE of a rank's
-share of its node (memory.memory_per_rank; 4096^2 -> 1 with 11 GB a rank, 8 with 4 GB, 16 with 3).
+share of its node (memory.memory_per_rank; 4096^2 -> 1 with 11 GB a rank, 8 with 4 GB, 16 with 3),
+raised where a grid has fewer cases than ranks to nranks / cases, up to the grid rule's g below.
 Where the node's memory is unknown, from the grid: g = 1 up to N = 1024 and beyond that the smallest
 power of two keeping <= 1024^2 grid points per rank (N = 2048 -> 4, 4096 -> 16, 8192 -> 64). Never
 more than N/2 (the slab FFT's limit) nor than the ranks available. The farm starts with one group
@@ -79,21 +80,35 @@ class Finished(NamedTuple):
 
 # ------------------------------------------------------------------------------------------------
 # rules
-def ranks_for_grid(N, nranks, ranks_per_case="auto", memory=None):
+def ranks_for_grid(N, nranks, ranks_per_case="auto", memory=None, settings=None, count=None):
     """Ranks per case for an N x N grid with ``nranks`` ranks available (see the module doc);
-    ``memory``: bytes a rank may use (memory.memory_per_rank), None where unknown."""
+    ``memory``: bytes a rank may use (memory.memory_per_rank), None where unknown; ``settings``: the
+    job's SolverSettings, whose Krylov budgets enter the case's estimate (default: the defaults);
+    ``count``: the grid's unfinished cases.  auto by memory never leaves ranks idle for want of cases:
+    with fewer cases than ranks each gets up to nranks / count ranks (a power of two), but never more
+    than the grid rule gives, beyond which more ranks stop paying."""
     N = int(N)
     cap = max(1, min(N // 2, int(nranks)))
     if ranks_per_case == "auto" and memory is not None:
         g = 1
-        while g < cap and case_bytes(N, g) > MEMORY_USE * memory:
+        while g < cap and case_bytes(N, g, settings) > MEMORY_USE * memory:
             g *= 2
+        if count:
+            fill = min(_grid_ranks(N), nranks // count)
+            while 2 * g <= fill:
+                g *= 2
     elif ranks_per_case == "auto":
-        need = N * N / AUTO_POINTS_PER_RANK
-        g = 1 if need <= 1 else 2 ** math.ceil(math.log2(need) - 1e-12)
+        g = _grid_ranks(N)
     else:
         g = int(ranks_per_case)
     return max(1, min(g, cap))
+
+
+def _grid_ranks(N):
+    """The grid rule: 1 up to AUTO_POINTS_PER_RANK points, else the smallest power of two keeping at
+    most that many points a rank."""
+    need = N * N / AUTO_POINTS_PER_RANK
+    return 1 if need <= 1 else 2 ** math.ceil(math.log2(need) - 1e-12)
 
 
 def case_weight(N):
@@ -128,18 +143,22 @@ class Chain:
         return len(self.cases) * case_weight(self.N)
 
 
-def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=None):
-    """Chains of the unfinished cases (``todo``: booleans), ordered largest first; ``memory`` as in
-    ranks_for_grid."""
+def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=None, settings=None):
+    """Chains of the unfinished cases (``todo``: booleans), ordered largest first; ``memory`` and
+    ``settings`` as in ranks_for_grid, which counts each grid's unfinished cases."""
     by_key = {}
     for i, c in enumerate(cases):
         if todo[i]:
             by_key.setdefault((c.q1, c.seed, c.velocity), []).append(i)
+    count = {}
+    for key, idx in by_key.items():
+        N = grid_of(key[0])
+        count[N] = count.get(N, 0) + len(idx)
     chains = []
     for key, idx in by_key.items():
         idx.sort(key=lambda i: cases[i].pressure)
         N = grid_of(key[0])
-        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case, memory)))
+        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case, memory, settings, count[N])))
     chains.sort(key=lambda ch: (-ch.g, -ch.N, -len(ch.cases), ch.key))
     for k, ch in enumerate(chains):
         ch.cid = k
