@@ -16,10 +16,11 @@ from vecontact.solver.settings import SolverSettings
 
 __all__ = ["case_bytes", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
 
-# the solver's arrays per grid point of a case: 5.9 GB peak at 4096² on 1 rank with a small basis [RESULTS.md]
+# the solver's arrays per grid point of a case: 6.0e9 B peak at 4096² on 1 rank, 0.01 m/s, 4.5 % [RESULTS.md]
 BYTES_PER_POINT = 360
-# peak Krylov memory over its budget: 9.5 GB at 4096², 10 m/s, 27 % on 1 rank, 6.2 GB a rank on 2 [RESULTS.md]
-KRYLOV_PEAK = 1.2
+# peak Krylov memory over the basis of the restart rules: 10.1e9 B at 4096², 10 m/s on 1 rank (the
+# farm's VmHWM in the 4096² study), 6.4e9 B a rank on 2 [RESULTS.md]
+KRYLOV_PEAK = 1.4
 # the part of a rank's share auto lets a case fill (the rest: the system, the farm, MPI's buffers)
 MEMORY_USE = 0.9
 

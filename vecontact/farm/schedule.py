@@ -11,7 +11,7 @@ Groups
 ``COMM_WORLD`` is split into groups; a group solves one case at a time on all its ranks (slab FFT).
 The ranks a case needs, g(N), come from ``numerics.ranks_per_case`` or, with ``auto``, from memory:
 the smallest power of two whose share of the case (memory.case_bytes) fits in MEMORY_USE of a rank's
-share of its node (memory.memory_per_rank; 4096^2 -> 1 with 11 GB a rank, 8 with 4 GB, 16 with 3),
+share of its node (memory.memory_per_rank; 4096^2 -> 1 with 12 GB a rank, 8 with 4 GB, 16 with 3),
 raised where a grid has fewer cases than ranks to nranks / cases, up to the grid rule's g below.
 Where the node's memory is unknown, from the grid: g = 1 up to N = 1024 and beyond that the smallest
 power of two keeping <= 1024^2 grid points per rank (N = 2048 -> 4, 4096 -> 16, 8192 -> 64). Never
