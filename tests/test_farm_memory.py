@@ -89,6 +89,11 @@ def test_build_chains_passes_memory():
     # the count is the grid's unfinished cases: with one left, both ranks
     [ch] = schedule.build_chains(cases, [False, True], lambda q1: 4096, 2, "auto", 12.2 * GB)
     assert ch.g == 2
+    # counted per grid: one 4096^2 case beside a hundred 512^2 ones on 8 ranks
+    mixed = [Case(2e6, 1, 1.0, 1.0)] + [Case(1e6, 1, 1.0, float(p)) for p in range(1, 101)]
+    grids = {2e6: 4096, 1e6: 512}
+    chains = schedule.build_chains(mixed, [True] * 101, grids.get, 8, "auto", 12.2 * GB)
+    assert {(ch.N, ch.g, len(ch.cases)) for ch in chains} == {(4096, 8, 1), (512, 1, 100)}
     # the job's Krylov budgets enter the estimate: 1 GB bases let a 4096^2 case fit on half the ranks
     small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
     [ch] = schedule.build_chains(cases, todo, lambda q1: 4096, 8, "auto", 4 * GB)

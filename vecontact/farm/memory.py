@@ -2,9 +2,9 @@
 
 auto gives a grid the fewest ranks per case (a power of two) whose share of the case fits in one
 rank's share of its node: a one-rank case does no transposes, and two one-rank cases at once cost
-0.60-0.77x (4096²) and 0.58-0.63x (2048²) the core-seconds of the same cases on two ranks
-(benchmarks/RESULTS.md, "One rank per case at 4096²").  Where the node's memory cannot be read, auto falls back to the grid rule
-(schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
+0.79-0.87x the core-seconds of the same cases on two ranks at 2048² and 4096²
+(benchmarks/RESULTS.md, "One rank per case at 4096²").  Where the node's memory cannot be read,
+auto falls back to the grid rule (schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
 
 Sizes are bytes.  The node's memory is Linux's MemAvailable, capped by the job's cgroup (v2
 ``memory.max`` less ``memory.current``, v1 ``memory.limit_in_bytes`` less ``memory.usage_in_bytes``,
@@ -35,8 +35,8 @@ def case_bytes(N, g, settings=None):
     by default), less where the restart caps bind, more where ``restart_min`` does."""
     s = SolverSettings() if settings is None else settings
     n = float(N) * float(N) / max(1, int(g))
-    area = {"contact": 1.0, "free": 0.0}.get(s.contact_step, max(s.contact_step_area, s.contact_step_area_large))
-    n_contact = area * n
+    widest = max(s.contact_step_area, s.contact_step_area_large)
+    n_contact = {"contact": 1.0, "free": 0.0}.get(s.contact_step, widest) * n
     free = (s.restart(n) + 1) * n
     inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact if n_contact > 0 else 0.0
     return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner)

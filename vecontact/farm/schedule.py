@@ -158,7 +158,8 @@ def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=Non
     for key, idx in by_key.items():
         idx.sort(key=lambda i: cases[i].pressure)
         N = grid_of(key[0])
-        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case, memory, settings, count[N])))
+        g = ranks_for_grid(N, nranks, ranks_per_case, memory, settings, count[N])
+        chains.append(Chain(-1, key, idx, N, g))
     chains.sort(key=lambda ch: (-ch.g, -ch.N, -len(ch.cases), ch.key))
     for k, ch in enumerate(chains):
         ch.cid = k
