@@ -254,7 +254,7 @@ class Numerics(_Section):
     petsc: dict = field(default_factory=dict)   # PETSc options {name without '-': value or None}
     fields: tuple = ()                          # fields stored per case: pressure, gap, displacement, contact
     downsample: int = 1                         # every downsample-th grid point of the stored fields
-    ranks_per_case: Union[str, int] = "auto"    # ranks solving one case together, or auto (by memory)
+    ranks_per_case: Union[str, int] = "auto"    # ranks solving one case together, or auto (by memory and case count)
     coarse: bool = True                         # coarse-grid start of each solve
     max_iterations: Optional[int] = None        # Newton steps at most, None: the solver's default
     threads: int = 1                            # FFTW threads per rank

@@ -38,7 +38,7 @@ def case_bytes(N, g, settings=None):
     widest = max(s.contact_step_area, s.contact_step_area_large)
     n_contact = {"contact": 1.0, "free": 0.0}.get(s.contact_step, widest) * n
     free = (s.restart(n) + 1) * n
-    inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact if n_contact > 0 else 0.0
+    inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact
     return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner)
 
 

@@ -150,16 +150,15 @@ def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=Non
     for i, c in enumerate(cases):
         if todo[i]:
             by_key.setdefault((c.q1, c.seed, c.velocity), []).append(i)
+    grid = {key: grid_of(key[0]) for key in by_key}
     count = {}
     for key, idx in by_key.items():
-        N = grid_of(key[0])
-        count[N] = count.get(N, 0) + len(idx)
+        count[grid[key]] = count.get(grid[key], 0) + len(idx)
     chains = []
     for key, idx in by_key.items():
         idx.sort(key=lambda i: cases[i].pressure)
-        N = grid_of(key[0])
-        g = ranks_for_grid(N, nranks, ranks_per_case, memory, settings, count[N])
-        chains.append(Chain(-1, key, idx, N, g))
+        N = grid[key]
+        chains.append(Chain(-1, key, idx, N, ranks_for_grid(N, nranks, ranks_per_case, memory, settings, count[N])))
     chains.sort(key=lambda ch: (-ch.g, -ch.N, -len(ch.cases), ch.key))
     for k, ch in enumerate(chains):
         ch.cid = k
