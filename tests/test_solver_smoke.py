@@ -222,3 +222,24 @@ def test_ksp_options_reach_the_free_set_steps():
     capped_lin, capped_it = run(ksp_max_it=3)
     assert free_lin > 3 * free_it, (free_lin, free_it)
     assert 0 < capped_lin <= 3 * capped_it, (capped_lin, capped_it)
+
+
+def test_one_blas_thread_during_the_solve():
+    """Under mpiexec numpy's OpenBLAS would run a thread per core in every rank (4.5x slower at 1024^2 on
+    2 ranks): solve_contact holds the BLAS to one thread, whatever it had, and gives the threads back."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return [m["num_threads"] for m in threadpool_info() if m["user_api"] == "blas"]
+
+    assert blas_threads(), "no BLAS found by threadpoolctl: the thread limit would do nothing"
+    seen = []
+    fft = _fft(64)
+    h = _random_surface(fft, 1e-4)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert set(blas_threads()) == {2}
+        r = solve_contact(fft, 1e-4, h, mod, 1.0, 2e5, monitor=lambda n, it, res: seen.append(blas_threads()))
+        assert set(blas_threads()) == {2}        # given back
+    assert r.converged and seen
+    assert all(set(s) == {1} for s in seen)

@@ -1,9 +1,11 @@
 """``solve_contact``: the entry point of the exact numerical solver (see package docstring)."""
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from vecontact.solver.operator import ContactOperator, is_elastic_on_grid
 from vecontact.solver.options import parse, solver_items
@@ -30,6 +32,18 @@ def _check_warm(warm, fft):
     return st
 
 
+def _one_blas_thread(solve):
+    """Run ``solve`` with one BLAS thread, then give the BLAS back its threads: under mpiexec numpy's
+    OpenBLAS otherwise starts a thread per core in every rank, and a 2-rank 1024^2 solve took 4.5x as
+    long (benchmarks/RESULTS.md, "BLAS threads")."""
+    @functools.wraps(solve)
+    def one_thread(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return solve(*args, **kwargs)
+    return one_thread
+
+
+@_one_blas_thread
 def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, method="snes",
                   petsc_options=None, warm=None, coarse=True, max_iterations=None,
                   store=("pressure", "gap", "displacement"), monitor=None, settings=None):
@@ -61,6 +75,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     settings : SolverSettings (settings.py; default: its defaults), every tuning constant of the solve
 
     Returns a ContactResult; never raises for non-convergence (converged=False, residual, reason).
+    The BLAS runs one thread during the solve, whatever the environment asks for.
     """
     t0 = time.perf_counter()
     comm = fft.comm
