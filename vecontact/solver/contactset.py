@@ -105,7 +105,7 @@ class ContactSetStep(SubsetStep):
         w.reshape(-1)[idx] = s0                           # s~
         fft.apply(w, self.op.c, self.out)                 # c s~
         b = self._b.getArray()
-        np.take(r.ravel(), idx, out=b)
+        np.take(r.ravel(), idx, out=b, mode="wrap")        # idx is in range; "raise" buffers out
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
         self._r = r

@@ -112,7 +112,7 @@ class FreeSetStep(SubsetStep):
         np.multiply(r, self.act, out=self.w)              # P_C r
         self.fft.apply(self.w, self.m_k, self.out)        # m P_C r / kappa
         b = self._b.getArray()
-        np.take(r.ravel(), self.idx, out=b)
+        np.take(r.ravel(), self.idx, out=b, mode="wrap")   # idx is in range; "raise" buffers out
         b -= np.take(self.out.ravel(), self.idx)
         self._r = r
         self.solve()

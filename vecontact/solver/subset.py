@@ -74,9 +74,9 @@ class Restricted:
         g.buf.reshape(-1)[idx] = x      # not .flat[idx] nor np.put: slower (RESULTS.md)
         g.fft.apply(g.buf, self.multiplier, g.out)
         if y.dtype == g.out.dtype:
-            np.take(g.out.ravel(), idx, out=y)
+            np.take(g.out.ravel(), idx, out=y, mode="wrap")   # mode="raise" buffers out: 1.3-2.9x slower
         else:                           # take's own casting copies (and casts) y's old contents first
-            np.copyto(y, np.take(g.out.ravel(), idx, out=g.gathered(idx.size)), casting="same_kind")
+            np.copyto(y, np.take(g.out.ravel(), idx, out=g.gathered(idx.size), mode="wrap"), casting="same_kind")
         if self.post is not None:
             self.post(y, g.out)
 
