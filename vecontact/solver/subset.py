@@ -76,7 +76,8 @@ class Restricted:
         if y.dtype == g.out.dtype:
             np.take(g.out.ravel(), idx, out=y, mode="wrap")   # mode="raise" buffers out: 1.3-2.9x slower
         else:                           # take's own casting copies (and casts) y's old contents first
-            np.copyto(y, np.take(g.out.ravel(), idx, out=g.gathered(idx.size), mode="wrap"), casting="same_kind")
+            gathered = np.take(g.out.ravel(), idx, out=g.gathered(idx.size), mode="wrap")
+            np.copyto(y, gathered, casting="same_kind")
         if self.post is not None:
             self.post(y, g.out)
 
