@@ -36,7 +36,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
-from vecontact.solver.subset import Restricted, SubsetStep
+from vecontact.solver.subset import Restricted, SubsetStep, gather
 
 __all__ = ["ContactSetStep", "oracle_solve"]
 
@@ -105,7 +105,7 @@ class ContactSetStep(SubsetStep):
         w.reshape(-1)[idx] = s0                           # s~
         fft.apply(w, self.op.c, self.out)                 # c s~
         b = self._b.getArray()
-        np.take(r.ravel(), idx, out=b, mode="wrap")        # idx is in range; "raise" buffers out
+        gather(r, idx, b)
         b -= np.take(self.out.ravel(), idx)
         b -= self.mean_C(b)
         self._r = r

@@ -36,7 +36,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.settings import PETSC_FREE_CYCLE_DEFAULTS, PETSC_FREE_DEFAULTS
-from vecontact.solver.subset import Restricted, SingleCycles, SubsetStep
+from vecontact.solver.subset import Restricted, SingleCycles, SubsetStep, gather
 
 __all__ = ["FreeSetStep"]
 
@@ -112,7 +112,7 @@ class FreeSetStep(SubsetStep):
         np.multiply(r, self.act, out=self.w)              # P_C r
         self.fft.apply(self.w, self.m_k, self.out)        # m P_C r / kappa
         b = self._b.getArray()
-        np.take(r.ravel(), self.idx, out=b, mode="wrap")   # idx is in range; "raise" buffers out
+        gather(r, self.idx, b)
         b -= np.take(self.out.ravel(), self.idx)
         self._r = r
         self.solve()

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
+from vecontact.solver.subset import gather
+
 __all__ = ["ViNewton"]
 
 
@@ -79,7 +81,7 @@ class ViNewton:
         self.full.reshape(-1)[idx] = x.getArray(readonly=True)
         st.fft.apply(self.full, multiplier, self.out)
         ya = y.getArray()
-        np.take(self.out.ravel(), idx, out=ya, mode="wrap")
+        gather(self.out, idx, ya)
         if shift_off:   # sum and count off I: the grid's minus I's (not a masked sum: RESULTS.md)
             buf = np.array([np.sum(self.out) - np.sum(ya), self.out.size - idx.size], dtype=float)
             st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
