@@ -15,6 +15,7 @@ from vecontact.solver.freeset import FreeSetStep
 from vecontact.solver.operator import ContactOperator
 from vecontact.solver.settings import SolverSettings
 from vecontact.solver.snes import petsc
+from vecontact.solver.subset import Workspace
 
 N, L = 32, 1e-4
 
@@ -77,6 +78,37 @@ def test_step_solves_the_newton_system(kind, cycle, precision, area):
         assert np.max(np.abs(op.m)) / op.kappa < 1e3      # the rounding bound of the docstring holds
     finally:
         step.release()
+
+
+def test_the_two_step_types_share_one_workspace():
+    """ncp_solve gives both step types one Workspace, so a solve holds their whole-grid arrays once.
+    Alternating between them on sets of other sizes, each still solves its Newton system (the bound of
+    test_step_solves_the_newton_system): a shared Grid's buffer is cleared of the other step's points
+    before a product (Grid.scatter).  Clearing only a step's own previous points, as each step did
+    while it had its own Grid, fails here by O(1).  The float32 Grid is shared too: the contact set's
+    FGMRES preconditioner and the free set's float32 cycles both form products on it."""
+    op = _operator()
+    settings = SolverSettings(free_cycle=5, cycle_precision="single")
+    work = Workspace(op.fft)
+    steps = dict(contact=ContactSetStep(op, op.kappa, petsc(), "steptest_", settings, work),
+                 free=FreeSetStep(op, op.kappa, petsc(), "steptest_", settings, work))
+    r = np.random.default_rng(7).standard_normal((N, N))
+    try:
+        assert steps["contact"].grid is steps["free"].grid and steps["contact"].w is steps["free"].w
+        for mode, area in [("contact", 0.1), ("free", 0.6), ("contact", 0.3), ("free", 0.2), ("contact", 0.1)]:
+            act = op.hhat > np.quantile(op.hhat, 1.0 - area)
+            step = steps[mode]
+            if mode == "free":
+                step.set_active(act, int(np.count_nonzero(act)))
+                step.start_cycles()
+            step.set_tolerances(1e-13, 0.0, 500)
+            x = _apply_step(step, act, r)
+            assert np.max(np.abs(_jacobian(op, act, x) - r)) <= 1e-9 * np.max(np.abs(r)), (mode, area)
+        assert steps["contact"].ran_float32_pairs and steps["free"].ran_float32_pairs
+        assert work.float32_grid() is steps["free"].float32_grid()
+    finally:
+        for step in steps.values():
+            step.release()
 
 
 @pytest.mark.parametrize("precision", ["single", "double"])

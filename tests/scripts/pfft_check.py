@@ -154,11 +154,47 @@ def check_single(comm, N, tol=2e-6):
     one.free()
 
 
+def check_scale_and_release(comm, N):
+    """``apply(..., scale=s)`` is ``apply`` with the multiplier times s (to rounding; s = 1 bit for bit),
+    in both precisions; ``release_arrays`` lets go of the caller's arrays that FFTW's plans (and the
+    twin's) keep from their last execution."""
+    import gc
+    import weakref
+
+    fft = SlabFFT(comm, N, planner="estimate", wisdom_file=False)
+    one = fft.single()
+    rs, re_, cs, ce = fft.row_start, fft.row_stop, fft.col_start, fft.col_stop
+    rng = np.random.default_rng(3000 + N)
+    full = rng.standard_normal((N, N))
+    mult = (rng.standard_normal((N, N // 2 + 1)) + 1j * rng.standard_normal((N, N // 2 + 1)))[:, cs:ce].copy()
+    x = fft.real_array()
+    x[...] = full[rs:re_]
+    ref = fft.apply(x, mult * 0.37)
+    assert rel(fft.apply(x, mult, scale=0.37), ref) < 1e-14
+    assert np.array_equal(fft.apply(x, mult, scale=1.0), fft.apply(x, mult))
+    x32 = x.astype(np.float32)
+    assert rel(one.apply(x32, mult.astype(np.complex64), scale=0.37), ref) < 2e-6
+    gone = []
+    for f, inp in ((fft, x), (one, x32)):
+        out = f.apply(inp, mult.astype(f.complex_dtype))
+        spec = f.forward(inp)
+        gone += [weakref.ref(out), weakref.ref(spec)]
+        del out, spec
+    gc.collect()
+    # the plans hold some of them (which ones depends on the ranks: transposes go through buffers)
+    fft.release_arrays()
+    gc.collect()
+    assert all(r() is None for r in gone), [r() is None for r in gone]
+    fft.free()
+    one.free()
+
+
 def check_all(comm):
     for N in SIZES:
         if comm.size <= N // 2:
             check_one(comm, N)
             check_single(comm, N)
+            check_scale_and_release(comm, N)
 
 
 if __name__ == "__main__":

@@ -330,6 +330,20 @@ class SlabFFT:
         if self._single is not None:
             self._single.reset_counters()
 
+    def release_arrays(self):
+        """Point the plans back at this SlabFFT's own buffers (and the twin's at its own).  An FFTW plan
+        keeps the arrays of its last execution alive, and those are the caller's: a solve's fields,
+        a coarse level's operator; solve_contact calls this when it is done with a grid."""
+        if self.size == 1:
+            self._p_fwd.update_arrays(self._rbuf, self._B)
+            self._p_bwd.update_arrays(self._B, self._rbuf)
+        else:
+            self._p_r2c.update_arrays(self._rbuf, self._A)
+            self._p_c2r.update_arrays(self._A, self._rbuf)
+            self._p_xf_ip.update_arrays(self._B, self._B)
+        if self._single is not None:
+            self._single.release_arrays()
+
     # ------------------------------------------------------------------ core transforms
     def _forward_into(self, real_in, dst):
         """Forward transform of real_in into ``dst`` (aligned C-contiguous Fourier array, may be B)."""
@@ -346,8 +360,9 @@ class SlabFFT:
                 self.comm.Alltoallw(self._msgA, [dst, self._msgB[1], self._msgB[2]])
             _run(self._p_xf_ip, dst, dst)
 
-    def _backward_from_B(self, real_out, scaled):
-        """Backward transform of B (destroyed). P > 1: B must not be x-transformed yet."""
+    def _backward_from_B(self, real_out, scaled, scale=1.0):
+        """Backward transform of B (destroyed), times ``scale`` / N^2 unless ``scaled``. P > 1: B must not
+        be x-transformed yet."""
         dst = real_out if self._ok_real(real_out) else self._rbuf
         if self.size == 1:
             _run(self._p_bwd, self._B, dst)
@@ -356,7 +371,7 @@ class SlabFFT:
             self._b2a()
             _run(self._p_c2r, self._A, dst)
         if not scaled:
-            np.multiply(dst, self._scale, out=real_out)
+            np.multiply(dst, self._scale if scale == 1.0 else self._scale * scale, out=real_out)
         elif dst is not real_out:
             np.copyto(real_out, dst)
 
@@ -396,12 +411,14 @@ class SlabFFT:
         self.n_backward += 1
         return real_out
 
-    def apply(self, real_in, multiplier, real_out=None):
-        """``backward(multiplier * forward(real_in))`` with no temporaries; counts one pair.
+    def apply(self, real_in, multiplier, real_out=None, scale=1.0):
+        """``scale * backward(multiplier * forward(real_in))`` with no temporaries; counts one pair.
 
         ``multiplier`` is complex or real, broadcastable to ``local_fourier_shape`` (e.g. a full local
         array, or shape (N, 1) for a function of kx only).  ``real_out`` may be ``real_in``.
-        Use ``hermitian_fix`` on multipliers that are not Hermitian on the x-Nyquist row.
+        ``scale`` (a number) rides on the 1/N^2 pass: a multiple of a stored multiplier without a
+        whole-grid copy of it.  Use ``hermitian_fix`` on multipliers that are not Hermitian on the
+        x-Nyquist row.
         """
         self._check_real(real_in)
         if real_out is None:
@@ -411,7 +428,7 @@ class SlabFFT:
         t0 = time.perf_counter()
         self._forward_into(real_in, self._B)
         np.multiply(self._B, multiplier, out=self._B)
-        self._backward_from_B(real_out, scaled=False)
+        self._backward_from_B(real_out, scaled=False, scale=scale)
         _APPLY_SECONDS[0] += time.perf_counter() - t0
         self.n_apply += 1
         return real_out

@@ -16,10 +16,11 @@ from vecontact.solver.settings import SolverSettings
 
 __all__ = ["case_bytes", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
 
-# the solver's arrays per grid point of a case: 6.0e9 B peak at 4096² on 1 rank, 0.01 m/s, 4.5 % [RESULTS.md]
-BYTES_PER_POINT = 360
-# peak Krylov memory over the basis of the restart rules: 10.1e9 B at 4096², 10 m/s on 1 rank (the
-# farm's VmHWM in the 4096² study), 6.4e9 B a rank on 2 [RESULTS.md]
+# the solver's arrays per grid point of a case: 4.5e9 B peak at 4096² on 1 rank, 0.01 m/s, 4.5 % (6.0e9
+# before session 37) [RESULTS.md, "Memory per grid point"]
+BYTES_PER_POINT = 270
+# peak Krylov memory over the basis of the restart rules: 8.1e9 B at 4096², 10 m/s, 27 % on 1 rank
+# (9.7e9 before session 37, 10.1e9 in the farm's 4096² study) [RESULTS.md]
 KRYLOV_PEAK = 1.4
 # the part of a rank's share auto lets a case fill (the rest: the system, the farm, MPI's buffers)
 MEMORY_USE = 0.9

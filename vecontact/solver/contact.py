@@ -148,6 +148,11 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
             if prev is not None:
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
                 g0 = smooth_gap(op, g0, cfg.smooth_sweeps, cfg.smooth_omega)
+            # the coarse levels' operators and fields are not needed by the fine solve: free them first
+            # (at 4096^2 the N/2 level's alone is about 20 bytes a fine grid point)
+            prev = opc = Hc = hc = gc0 = gh = ph = gw = None
+            for f, _ in coarse_start.values():
+                f.release_arrays()
         if g0 is None:
             g0 = bearing_guess(op, cfg.bearing_area_min, cfg.bearing_area_max, cfg.bearing_tol)
         maxit = cfg.newton_max_it if max_iterations is None else int(max_iterations)
@@ -162,6 +167,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     p_out = np.where(act, phat * op.sigma0, 0.0)
     g_out = np.where(act, 0.0, ghat * op.ell)
     scal, w = postprocess(op, p_out, g_out)
+    fft.release_arrays()            # the plans would keep the last fields of this solve alive
     for n, (f, t0c) in coarse_start.items():
         by_level[n] = (f.transforms - t0c) / 2.0
     by_level[fft.N] = (fft.transforms - tr0) / 2.0

@@ -52,10 +52,9 @@ class ContactSetStep(SubsetStep):
 
     mode = "contact"
 
-    def __init__(self, op, kappa, PETSc, prefix, settings):
-        super().__init__(op, kappa, PETSc, prefix + "contact_", settings)
-        self.freef = self.fft.real_array()   # 1.0 on F, 0.0 on C
-        self.s = self.fft.real_array()       # the pressure increment s of update()
+    def __init__(self, op, kappa, PETSc, prefix, settings, work=None):
+        super().__init__(op, kappa, PETSc, prefix + "contact_", settings, work)
+        self.free = np.zeros(self.shape, dtype=bool)   # the free set F
 
     # ------------------------------------------------------------------ SubsetStep hooks
     def defaults(self, n_loc):
@@ -89,7 +88,7 @@ class ContactSetStep(SubsetStep):
         """New contact set ``act`` (bool, local rows) with ``n_active`` points on all ranks (> 0)."""
         if int(n_active) == 0:
             raise ValueError("empty contact set")
-        np.logical_not(act, out=self.freef, casting="unsafe")
+        np.logical_not(act, out=self.free)
         self.select(np.flatnonzero(act.ravel()), n_active)
 
     # ------------------------------------------------------------------ PC interface
@@ -99,7 +98,7 @@ class ContactSetStep(SubsetStep):
         r = x.getArray(readonly=True).reshape(self.shape)
         xo = y.getArray().reshape(self.shape)
         w = self.w
-        np.multiply(r, self.freef, out=w)
+        np.multiply(r, self.free, out=w)
         w *= self.kappa                                   # s_F = kappa r_F, 0 on C
         s0 = -self.fft.sum(w) / self.n_S
         w.reshape(-1)[idx] = s0                           # s~
@@ -116,7 +115,7 @@ class ContactSetStep(SubsetStep):
         """The whole-grid Newton update ``xo`` (local rows) of the inner solution ``y`` (a Vec on C) for
         the right-hand side of the running apply (one FFT pair): x = c s + e, s = s~ + y on C."""
         idx = self.idx
-        s = self.s
+        s = self.work.s                                   # the pressure increment
         np.copyto(s, self.w)
         s.reshape(-1)[idx] += y.getArray(readonly=True)
         self.fft.apply(s, self.op.c, xo)                  # c s

@@ -50,10 +50,8 @@ class FreeSetStep(SubsetStep):
 
     mode = "free"
 
-    def __init__(self, op, kappa, PETSc, prefix, settings):
-        super().__init__(op, kappa, PETSc, prefix, settings)
-        self.c_k = op.c * self.kappa         # kappa c: the compliance in units of the Jacobian's rows
-        self.m_k = op.m / self.kappa         # m / kappa: the Jacobian's free rows
+    def __init__(self, op, kappa, PETSc, prefix, settings, work=None):
+        super().__init__(op, kappa, PETSc, prefix, settings, work)
         self.act = None
         self.n_active = 0
 
@@ -82,10 +80,11 @@ class FreeSetStep(SubsetStep):
                             ksp_ksp_gmres_restart=str(k)))
 
     def operator(self):
-        return Restricted(self, self.m_k)
+        return Restricted(self, self.op.m, scale=1.0 / self.kappa)      # m / kappa: the Jacobian's free rows
 
     def preconditioner(self):
-        return Restricted(self, self.c_k, self._rigid_shift)
+        # kappa c: the compliance in units of the Jacobian's rows
+        return Restricted(self, self.op.c, self._rigid_shift, scale=self.kappa)
 
     def _rigid_shift(self, z, full):
         # <kappa c P_F z>_C removed; the sum over C is the grid's minus F's (not where=act: RESULTS.md)
@@ -110,7 +109,7 @@ class FreeSetStep(SubsetStep):
         if self.n_S == 0:                                 # full contact: J = identity
             return
         np.multiply(r, self.act, out=self.w)              # P_C r
-        self.fft.apply(self.w, self.m_k, self.out)        # m P_C r / kappa
+        self.fft.apply(self.w, self.op.m, self.out, 1.0 / self.kappa)   # m P_C r / kappa
         b = self._b.getArray()
         gather(r, self.idx, b)
         b -= np.take(self.out.ravel(), self.idx)

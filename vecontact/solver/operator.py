@@ -56,8 +56,9 @@ class ContactOperator:
     ell : length unit (m) = h_rms of h (dx if h is flat)
     hrms : rms height of h (m), mean_h : mean of h (m)
     E : E(q_x v), shape (N, 1) complex
-    M : dimensional stiffness multiplier (Pa/m), hermitian-fixed, local Fourier shape, M[q=0] = 0
-    m : nondimensional stiffness  M ell / sigma0
+    m : nondimensional stiffness  M ell / sigma0, with M = |q| E(q_x v) / (2 (1 - nu^2)) the dimensional
+        stiffness multiplier (Pa/m), hermitian-fixed, local Fourier shape, M[q=0] = 0
+    M, q : M (from m) and |q| (1/m), made on each use: a solve does not hold them
     c : nondimensional compliance 1/m (0 at q = 0)
     k : contact stiffness (Pa/m); kappa = k ell / sigma0
     hhat : (h - mean h) / ell  (local rows)
@@ -86,20 +87,22 @@ class ContactOperator:
         self.ell = self.hrms if self.hrms > 0 else self.dx
 
         qx, qy, q = fft.wavevectors(self.L)
-        self.qx, self.q = qx, q
+        self.qx = qx
         self.E = modulus_on_grid(fft, self.L, modulus, self.velocity)
         M = q * self.E / (2.0 * (1.0 - self.nu ** 2))
+        del q
         M = np.array(np.broadcast_to(M, fft.local_fourier_shape), dtype=complex, order="C")
         fft.hermitian_fix(M)
         if fft.col_start == 0:
             M[0, 0] = 0.0
-        self.M = M
         w = fft.half_weights()
         absM = np.abs(M)
         loc = float(np.sum(absM.sum(axis=0) * w[0]))
         self.k = fft.sum(np.array([loc])) / float(N) ** 2
         self.kappa = self.k * self.ell / self.sigma0
-        self.m = M * (self.ell / self.sigma0)
+        M *= self.ell / self.sigma0
+        self.m = M
+        del M
         self._stiffness_bounds = None
         with np.errstate(divide="ignore", invalid="ignore"):
             c = np.where(absM > 0, 1.0 / np.where(absM > 0, self.m, 1.0), 0.0)
@@ -112,6 +115,16 @@ class ContactOperator:
         self.h_fourier = h_fourier
         self.p_h = fft.real_array()
         fft.backward(h_fourier * (self.m / self.ell), self.p_h)   # m has M_0 = 0: mean(h) drops out
+
+    @property
+    def M(self):
+        """The dimensional stiffness multiplier (Pa/m), M = m sigma0 / ell (a new array)."""
+        return self.m * (self.sigma0 / self.ell)
+
+    @property
+    def q(self):
+        """|q| (1/m), local Fourier shape (a new array)."""
+        return self.fft.wavevectors(self.L)[2]
 
     def slope_x(self):
         """dh/dx (local rows, dimensionless), spectral; the x-Nyquist row is dropped."""

@@ -85,8 +85,8 @@ def postprocess(op, p_out, g_out):
     if fft.col_start == 0:
         Wq[0, 0] = 0.0
     w = fft.backward(Wq * n2)
-    # dissipation: sum over full spectrum of q_x Im(M_q) |w_q|^2 / sigma0
-    dens = (op.qx * op.M.imag) * (Wq.real ** 2 + Wq.imag ** 2)
+    # dissipation: sum over full spectrum of q_x Im(M_q) |w_q|^2 / sigma0, with Im(M) / sigma0 = Im(m) / ell
+    dens = (op.qx * op.m.imag) * (Wq.real ** 2 + Wq.imag ** 2)
     loc = float(np.sum(dens.sum(axis=0) * fft.half_weights()[0]))
-    mu = fft.sum(np.array([loc])) / op.sigma0
+    mu = fft.sum(np.array([loc])) / op.ell
     return dict(area=area, mean_gap=mean_gap, rigid_position=rigid, mu_geometric=mu_geo, mu=mu), w

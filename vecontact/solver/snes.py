@@ -39,6 +39,7 @@ from vecontact.solver.measurestop import MeasureStop
 from vecontact.solver.newton import NewtonState
 from vecontact.solver.policy import StepPolicy, choose_step
 from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PETSC_VI_DEFAULTS
+from vecontact.solver.subset import Workspace
 from vecontact.solver.vi import ViNewton
 
 __all__ = ["ncp_solve", "petsc", "hold_comm", "POLICY_OFF"]
@@ -89,7 +90,6 @@ class _Semismooth:
         self.steps = steps                       # {"contact": ContactSetStep, "free": FreeSetStep}
         self.stop = stop                         # MeasureStop of the exact steps, or None
         self.settings = settings
-        self.m_k = state.op.m / state.kappa      # Jacobian multiplier on the free rows
         self.mode = None                         # where the current step is solved
         self.modes = []                          # (Newton step, mode) at every switch
         self.lin_history = []                    # linear iterations before each Newton step
@@ -133,7 +133,7 @@ class _Semismooth:
         st = self.state
         xa = st.view(x)
         ya = st.view(y, readonly=False)
-        st.fft.apply(xa, self.m_k, ya)       # m x / kappa on every point
+        st.fft.apply(xa, st.op.m, ya, 1.0 / st.kappa)     # m x / kappa on every point
         np.copyto(ya, xa, where=st.act)      # identity rows on the contact set
 
     def linear_iterations(self, snes):
@@ -240,8 +240,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     else:
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF))
-        steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings),
-                     free=FreeSetStep(op, state.kappa, PETSc, prefix, settings))
+        work = Workspace(fft)            # both step types' whole-grid arrays, held once
+        steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
+                     free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))
         stop = None
         if policy.own and settings.measure_stop == "on":
             stop = MeasureStop(state, tol, PETSc)
@@ -280,7 +281,7 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
                     reason="converged" if converged else reason.lower(), residual=float(res),
                     measures=meas, history=conv.history, seconds=time.perf_counter() - t0,
                     snes_type=snes.getType(), ksp_type=snes.getKSP().getType(), **form.diagnostics(int(lits)))
-        return state.g.copy(), state.p.copy(), act, info
+        return state.g, state.p, act, info      # not copies: the state is dropped below
     finally:
         form.release()
         for obj in (X, Fv, J, snes):

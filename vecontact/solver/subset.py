@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 from vecontact.solver.single import SingleGMRES
 
-__all__ = ["Grid", "Restricted", "SingleCycles", "SubsetStep", "gather"]
+__all__ = ["Grid", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
 
 
 def gather(full, idx, out):
@@ -26,16 +26,26 @@ def gather(full, idx, out):
 
 class Grid:
     """Where a Restricted product is formed: a SlabFFT (a step's, or its single-precision twin), its
-    real buffer ``buf`` (zero outside S: SubsetStep.select keeps it so), the whole-grid product ``out``,
-    a scratch of their dtype (``gathered``) for products wanted in the other precision, and the
+    real buffer ``buf`` (zero outside the points of the last ``scatter``), the whole-grid product
+    ``out``, a scratch of their dtype (``gathered``) for products wanted in the other precision, and the
     multipliers cast to its precision (``cast``, one copy each)."""
 
     def __init__(self, fft):
         self.fft = fft
         self.buf = fft.real_array()
         self.out = fft.real_array()
+        self.support = np.zeros(0, dtype=np.intp)     # the points the last scatter wrote
         self._gathered = np.empty(0, dtype=self.buf.dtype)
         self._casts = {}
+
+    def scatter(self, idx, x):
+        """``buf`` = x on the flat local points ``idx`` and zero elsewhere: the previous scatter's
+        points are cleared when ``idx`` is another array (a new S, or the other step type's)."""
+        flat = self.buf.reshape(-1)
+        if self.support is not idx:
+            flat[self.support] = 0.0
+            self.support = idx
+        flat[idx] = x       # not .flat[idx] nor np.put: slower (RESULTS.md)
 
     def cast(self, multiplier):
         """``multiplier`` in the grid's precision (the same array if it already is; made once)."""
@@ -56,29 +66,31 @@ class Grid:
 
 
 class Restricted:
-    """y = (multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python Mat
-    and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT.  ``grid``:
-    the Grid where the product is formed (default the step's float64 one)."""
+    """y = (scale multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python
+    Mat and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT; ``scale``:
+    a number (SlabFFT.apply: no scaled copy of the multiplier).  ``grid``: the Grid where the product is
+    formed (default the step's float64 one)."""
 
-    def __init__(self, step, multiplier, post=None, grid=None):
+    def __init__(self, step, multiplier, post=None, grid=None, scale=1.0):
         self.step = step
         self.multiplier = multiplier
         self.post = post
         self.grid = step.grid if grid is None else grid
+        self.scale = float(scale)
 
     def on(self, grid):
         """The same product formed on ``grid`` (the multiplier cast to its precision)."""
         if grid is self.grid:
             return self
-        return Restricted(self.step, grid.cast(self.multiplier), self.post, grid)
+        return Restricted(self.step, grid.cast(self.multiplier), self.post, grid, self.scale)
 
     def matvec(self, x, y):
         """y = the product of x (arrays of the local points of S; y of another precision than the
         grid's goes through ``grid.gathered``)."""
         g = self.grid
         idx = self.step.idx
-        g.buf.reshape(-1)[idx] = x      # not .flat[idx] nor np.put: slower (RESULTS.md)
-        g.fft.apply(g.buf, self.multiplier, g.out)
+        g.scatter(idx, x)
+        g.fft.apply(g.buf, self.multiplier, g.out, self.scale)
         if y.dtype == g.out.dtype:
             gather(g.out, idx, y)
         else:                           # take's own casting copies (and casts) y's old contents first
@@ -164,6 +176,31 @@ class SingleCycles:
         self.step.single_iterations += self.run(x.getArray(readonly=True), y.getArray())
 
 
+class Workspace:
+    """The whole-grid arrays of the Newton steps, held once for both step types (a solve runs one step
+    at a time): the float64 Grid, the float32 one (made on first use), and two real scratch arrays,
+    ``w`` (a step's right-hand side work) and ``s`` (ContactSetStep.update's; made on first use)."""
+
+    def __init__(self, fft):
+        self.fft = fft
+        self.grid = Grid(fft)
+        self.w = fft.real_array()
+        self._grid32 = None
+        self._s = None
+
+    def float32_grid(self):
+        """The Grid on the SlabFFT's single-precision twin (made on first use)."""
+        if self._grid32 is None:
+            self._grid32 = Grid(self.fft.single())
+        return self._grid32
+
+    @property
+    def s(self):
+        if self._s is None:
+            self._s = self.fft.real_array()
+        return self._s
+
+
 class SubsetStep:
     """Base of the Newton-step PCs: the inner KSP on the points ``idx`` of S, its restricted operator,
     the option defaults it puts into PETSc's database (removed again by ``release``) and the count of
@@ -172,9 +209,10 @@ class SubsetStep:
     A subclass gives ``defaults(n_loc)`` (option defaults under ``inner_prefix``, from the local size
     of the first S), ``operator()`` and ``preconditioner()`` (Restricted contexts) and ``apply``; it
     calls ``select(idx, n_S)`` from its ``set_active`` and ``solve()`` from its ``apply``.
+    ``work``: the Workspace it shares with the other step type (default: its own).
     """
 
-    def __init__(self, op, kappa, PETSc, inner_prefix, settings):
+    def __init__(self, op, kappa, PETSc, inner_prefix, settings, work=None):
         self.op = op
         self.fft = fft = op.fft
         self.comm = fft.comm
@@ -182,10 +220,11 @@ class SubsetStep:
         self.PETSc = PETSc
         self.settings = settings
         self.shape = fft.local_real_shape
-        self.grid = Grid(fft)           # the float64 products (Restricted); buf zero outside S (select)
+        self.work = Workspace(fft) if work is None else work
+        self.grid = self.work.grid      # the float64 products (Restricted)
         self.out = self.grid.out
-        self._grid32 = None             # the float32 one (float32_grid)
-        self.w = fft.real_array()
+        self.w = self.work.w
+        self._ran32 = False             # this step made products on the float32 Grid
         self.idx = np.zeros(0, dtype=np.intp)
         self._r = None                  # right-hand side (local rows) of the running apply, for update()
         self.n_S = 0
@@ -226,9 +265,6 @@ class SubsetStep:
     def select(self, idx, n_S):
         """Make S the local points ``idx`` (flat, sorted), ``n_S`` points on all ranks (> 0)."""
         PETSc = self.PETSc
-        for grid in (self.grid, self._grid32):
-            if grid is not None:
-                grid.buf.reshape(-1)[self.idx] = 0.0
         n_loc = int(idx.size)
         self.idx = idx
         self.n_S = int(n_S)
@@ -295,9 +331,8 @@ class SubsetStep:
 
     def float32_grid(self):
         """The Grid on the SlabFFT's single-precision twin (made on first use)."""
-        if self._grid32 is None:
-            self._grid32 = Grid(self.fft.single())
-        return self._grid32
+        self._ran32 = True
+        return self.work.float32_grid()
 
     def float32_pc(self):
         """Whether a preconditioner of a flexible method (FGMRES), which may round more than the
@@ -323,9 +358,9 @@ class SubsetStep:
 
     @property
     def ran_float32_pairs(self):
-        """Whether this step's solves ran float32 pairs (steps, cycles or preconditioners: only they make
-        the float32 Grid)."""
-        return self._grid32 is not None
+        """Whether this step's solves ran float32 pairs (steps, cycles or preconditioners: only they ask
+        for the float32 Grid)."""
+        return self._ran32
 
     def _solve_single(self):
         sg = self.single_context()
@@ -366,4 +401,4 @@ class SubsetStep:
             except Exception:
                 pass
         self._own_keys = []
-        self._single = self._cycles = self._grid32 = None
+        self._single = self._cycles = self.work = self.grid = self.out = self.w = None

@@ -1,0 +1,70 @@
+"""What a solve holds in numpy arrays per grid point, against the inventory of its arrays.
+
+The farm sizes ranks per case by the solver's memory (farm/memory.py), and a 4096^2 case on one rank
+holds 16.8 million points: every whole-grid float64 array is 134 MB there.  The inventory during the
+fine grid's Newton iterations (bytes per grid point; a complex half-spectrum array is 8):
+
+* the operator: m, c, the surface's spectrum, h^ and p_h (40);
+* the Newton state: g, p and the active set (17), and the start gap the caller passed (8);
+* the steps' one Workspace, shared by both step types: the product's buffer and result and the
+  right-hand side work (24), on the contact set also update's s (8) and, where the stiffness's range
+  lets the contact set's FGMRES precondition in float32, the float32 Grid (8) and m in float32 (4);
+* the measure stop's g and p (16); the step's index arrays (8 per point of its set).
+
+That is 106 (free-set steps, A/A0 0.88) and 127 (contact-set steps, A/A0 0.19).  Before session 37
+each step type had its own buffers, m / kappa and kappa c were kept as arrays (three of them), the
+dimensional M and |q| as well, the coarse levels' operators stayed alive through the fine solve (FFTW's
+plans held the last arrays they ran on: SlabFFT.release_arrays), and the result was copied out of the
+Newton state: 211 and 226 bytes a point here (measured), and 6.0 against 4.5 GB at 4096^2 on one rank
+(benchmarks/RESULTS.md, "Memory per grid point").
+
+The Krylov bases are left out: ``-vc_changing_precision double -vc_cycle_precision double`` puts them in
+PETSc's Vecs, which tracemalloc does not see (their size is the budgets' business, farm/memory.py).
+"""
+import math
+import tracemalloc
+
+import pytest
+from mpi4py import MPI
+
+from vecontact.core.pfft import SlabFFT
+from vecontact.core.surface import generate
+from vecontact.physics.modulus import HavriliakNegami
+from vecontact.physics.spectrum import SelfAffine
+from vecontact.solver import solve_contact
+
+N = 256
+Q0 = 2.5e5
+DOUBLE_KRYLOV = "-vc_changing_precision double -vc_cycle_precision double"
+
+
+@pytest.mark.parametrize("sigma0, mode, area, bound", [(3e5, "contact", 0.194, 136.0), (2e6, "free", 0.881, 115.0)])
+def test_a_solve_holds_its_inventory_of_arrays(sigma0, mode, area, bound):
+    """Traced numpy memory at every Newton iteration of the fine grid, over what was held before the
+    call, per grid point: at most the inventory above plus 9 bytes (the small arrays of N-length rows
+    and the coarse levels' sets), so one more whole-grid float64 array (8) fails; measured 130 and 108
+    (226 and 211 before session 37's changes).  A first solve makes the caches (coarse SlabFFTs, the
+    float32 twin) outside the measurement."""
+    L = 2 * math.pi / Q0
+    spectrum = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
+    modulus = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
+    h = generate(fft, L, spectrum, 1)
+    solve_contact(fft, L, h, modulus, 10.0, sigma0, tolerance=1e-4, petsc_options=DOUBLE_KRYLOV)
+    held = []
+
+    def monitor(level, iteration, residual):
+        if level == N:
+            held.append(tracemalloc.get_traced_memory()[0])
+
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        r = solve_contact(fft, L, h, modulus, 10.0, sigma0, tolerance=1e-8, petsc_options=DOUBLE_KRYLOV,
+                          store=("pressure",), monitor=monitor)
+    finally:
+        tracemalloc.stop()
+    assert r.converged and r.area == pytest.approx(area, abs=1e-3)
+    assert r.diagnostics["step_modes"][0][1] == mode
+    per_point = (max(held) - before) / float(N * N)
+    assert 60.0 < per_point <= bound, per_point
