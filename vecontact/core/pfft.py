@@ -371,7 +371,7 @@ class SlabFFT:
             self._b2a()
             _run(self._p_c2r, self._A, dst)
         if not scaled:
-            np.multiply(dst, self._scale if scale == 1.0 else self._scale * scale, out=real_out)
+            np.multiply(dst, self._scale * scale, out=real_out)     # x * 1.0 is x: scale 1 changes nothing
         elif dst is not real_out:
             np.copyto(real_out, dst)
 

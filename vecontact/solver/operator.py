@@ -102,7 +102,6 @@ class ContactOperator:
         self.kappa = self.k * self.ell / self.sigma0
         M *= self.ell / self.sigma0
         self.m = M
-        del M
         self._stiffness_bounds = None
         with np.errstate(divide="ignore", invalid="ignore"):
             c = np.where(absM > 0, 1.0 / np.where(absM > 0, self.m, 1.0), 0.0)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from vecontact.solver.subset import gather
+from vecontact.solver.subset import Grid, gather
 
 __all__ = ["ViNewton"]
 
@@ -25,8 +25,7 @@ class ViNewton:
     def __init__(self, state, PETSc):
         self.state = state
         self.PETSc = PETSc
-        self.full = state.fft.real_array()   # scatter / gather buffers of the sub-matrix products
-        self.out = state.fft.real_array()
+        self.grid = Grid(state.fft)          # scatter / gather buffers of the sub-matrix products
 
     def configure(self, snes, X):
         """Python PC and the bounds 0 <= g^ < inf."""
@@ -77,13 +76,13 @@ class ViNewton:
     def on_index_set(self, idx, x, multiplier, y, shift_off=False):
         """y = (multiplier x~)_I with x~ = x on I, 0 elsewhere; ``shift_off``: minus the mean off I first."""
         st = self.state
-        self.full[...] = 0.0
-        self.full.reshape(-1)[idx] = x.getArray(readonly=True)
-        st.fft.apply(self.full, multiplier, self.out)
+        g = self.grid
+        g.scatter(idx, x.getArray(readonly=True))
+        st.fft.apply(g.buf, multiplier, g.out)
         ya = y.getArray()
-        gather(self.out, idx, ya)
+        gather(g.out, idx, ya)
         if shift_off:   # sum and count off I: the grid's minus I's (not a masked sum: RESULTS.md)
-            buf = np.array([np.sum(self.out) - np.sum(ya), self.out.size - idx.size], dtype=float)
+            buf = np.array([np.sum(g.out) - np.sum(ya), g.out.size - idx.size], dtype=float)
             st.fft.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
             if buf[1] > 0:
                 ya -= buf[0] / buf[1]
