@@ -122,6 +122,46 @@ def test_single_gmres_flexible_same_iterations():
     assert np.linalg.norm(res[0][1] - res[1][1]) <= 1e-4 * np.linalg.norm(res[0][1])
 
 
+def test_single_gmres_without_preconditioner_skips_only_a_copy():
+    """``B`` None (the GMRES cycles): the basis vector goes to A as it is.  That only drops the copy an
+    identity preconditioner makes, so iterations, residual estimates and solution are the same bit for
+    bit (the contract: a copy does not round)."""
+    A, _, b = _system(seed=5)
+    opA, _ = _ops(A, A)
+    runs = []
+    for B in (lambda v, out: np.copyto(out, v, casting="same_kind"), None):
+        for restart in (12, 200):                                  # with and without restarts
+            gm = SingleGMRES(b.size, restart, _allsum)
+            x = np.empty_like(b)
+            its, est = gm.solve(opA, B, b, x, 1e-3, 0.0, 400)
+            runs.append((its, list(gm.history), x))
+    for (i1, h1, x1), (i2, h2, x2) in zip(runs[:2], runs[2:]):
+        assert i1 == i2 > 20 and h1 == h2 and np.array_equal(x1, x2)
+    # a true solve: unpreconditioned, the float32 products err by ~cond(A) x 6e-8 x sqrt(n) ~ 1e-4 of |b|
+    assert np.linalg.norm(b - A @ runs[3][2]) <= (1.05e-3 + 1e-4) * np.linalg.norm(b)
+
+
+def test_single_gmres_subtract_in_blocks(monkeypatch):
+    """The Gram-Schmidt update t -= h @ V a block at a time, with the norm of the result: against
+    float64 arithmetic, over whole blocks and a partial last one (a block of 2 chunks here).  t's
+    entries round once per product and subtraction (float32: ~1e-7 of the terms' size); the norm sums
+    in float32 over chunks of 8192 and in float64 over them (~1e-8 here, as _dots)."""
+    import vecontact.solver.single as single
+    monkeypatch.setattr(single, "_BLOCK", 2 * single._CHUNK)
+    rng = np.random.default_rng(2)
+    n = 5 * single._CHUNK + 123
+    V = rng.standard_normal((4, n)).astype(np.float32)
+    h = rng.standard_normal(4).astype(np.float32)
+    t = rng.standard_normal(n).astype(np.float32)
+    ref = t.astype(np.float64) - h.astype(np.float64) @ V.astype(np.float64)
+    gm = SingleGMRES(n, 3, _allsum)
+    assert gm.u.size == 2 * single._CHUNK                         # a block, not a whole vector
+    tt = gm._subtract(V, h, t)
+    scale = np.abs(h).sum() * np.abs(V).max() + np.abs(t).max()
+    assert np.max(np.abs(t - ref)) <= 4 * 6e-8 * scale
+    assert abs(tt / float(ref @ ref) - 1) <= 1e-6
+
+
 # double precision throughout: the reference of the float32 variants
 _DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0"}
 

@@ -30,6 +30,9 @@ __all__ = ["SingleGMRES"]
 
 # entries summed in float32 before the partial sums go on in float64 (_dots)
 _CHUNK = 8192
+# entries of a vector orthogonalised at a time (_subtract; a multiple of _CHUNK, so that its norm sums
+# as _dots does): the fastest of 2^15-2^19 in RESULTS.md, "The Gram-Schmidt update in blocks"
+_BLOCK = 32 * _CHUNK
 
 
 class SingleGMRES:
@@ -56,15 +59,17 @@ class SingleGMRES:
         work_store = np.empty(nw, dtype=work) if work_store is None else work_store
         self.V = basis_store[:(m + 1) * n].reshape(m + 1, n)
         self.t = basis_store[(m + 1) * n:(m + 2) * n]
-        self.u = basis_store[(m + 2) * n:(m + 3) * n]
+        self.u = basis_store[(m + 2) * n:(m + 2) * n + min(n, _BLOCK)]
         self.z = work_store[:n]
         self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
         self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
 
     @staticmethod
     def sizes(n_loc, restart, flexible):
-        """Entries of the float32 basis memory and of the work memory."""
-        return (restart + 3) * int(n_loc), (restart + 1 if flexible else 1) * int(n_loc)
+        """Entries of the float32 basis memory (the basis, the operator's product t, and _subtract's
+        block) and of the work memory."""
+        n = int(n_loc)
+        return (restart + 2) * n + min(n, _BLOCK), (restart + 1 if flexible else 1) * n
 
     def _dots(self, M, v):
         """M @ v (float32), summed in float32 over chunks of _CHUNK entries and in float64 over the
@@ -81,14 +86,29 @@ class SingleGMRES:
             out += M[:, c * _CHUNK:] @ v[c * _CHUNK:]
         return out
 
+    def _subtract(self, M, h, t):
+        """t -= h @ M (float32), a block of _BLOCK entries at a time, and returns the local t.t after it
+        (summed as _dots): t is read and written once, where a whole-vector product, subtraction and
+        norm make three passes over it and two over the product."""
+        n = t.size
+        u = self.u
+        total = 0.0
+        for s in range(0, n, _BLOCK):
+            e = min(s + _BLOCK, n)
+            ub, tb = u[:e - s], t[s:e]
+            np.matmul(h, M[:, s:e], out=ub)
+            tb -= ub
+            total += float(self._dots(tb.reshape(1, -1), tb)[0])
+        return total
+
     def _norm(self, v):
         return math.sqrt(float(self.allsum(self._dots(v.reshape(1, -1), v))[0]))
 
     def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
         (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
-        estimate)."""
-        V, z, t, u = self.V, self.z, self.t, self.u
+        estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy)."""
+        V, z, t = self.V, self.z, self.t
         x[...] = 0.0
         r = b
         its = 0
@@ -108,13 +128,14 @@ class SingleGMRES:
             g[0] = beta
             k = 0
             while k < m:
-                zk = self.Z[k] if self.flexible else z
-                B(V[k], zk)
+                if B is None:
+                    zk = V[k]
+                else:
+                    zk = self.Z[k] if self.flexible else z
+                    B(V[k], zk)
                 A(zk, t)
                 h = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
-                np.dot(h.astype(np.float32), V[:k + 1], out=u)
-                t -= u
-                hn = self._norm(t)
+                hn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], h.astype(np.float32), t)])[0]))
                 H[:k + 1, k] = h
                 H[k + 1, k] = hn
                 for i in range(k):                         # earlier Givens rotations
@@ -137,12 +158,16 @@ class SingleGMRES:
             y = np.zeros(k)
             for i in range(k - 1, -1, -1):
                 y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
-            if self.flexible:
+            if B is None:
+                np.dot(y.astype(np.float32), V[:k], out=t)
+                x += t
+            elif self.flexible:
                 np.dot(y.astype(z.dtype), self.Z[:k], out=z)
+                x += z
             else:
                 np.dot(y.astype(np.float32), V[:k], out=t)
                 B(t, z)
-            x += z
+                x += z
             if done:
                 return its, res
             # restart: the residual of the float64 right-hand side

@@ -144,10 +144,6 @@ class _Single:
         return SingleGMRES(n_loc, restart, allsum, flexible, self.work, stores[0][:need[0]], stores[1][:need[1]])
 
 
-def _identity(v, out):
-    np.copyto(out, v, casting="same_kind")
-
-
 class SingleCycles:
     """Python PC of a step's inner FGMRES (PETSc, float64 basis): exactly ``cycle`` iterations of
     unpreconditioned GMRES on the step's operator, with a float32 basis (single.py; its pairs in
@@ -170,7 +166,7 @@ class SingleCycles:
         step = self.step
         sg = step.cycle_context()
         gm = sg.gmres("inner", int(step.idx.size), self.cycle, step.fft._allsum, flexible=False)
-        return gm.solve(sg.A.matvec, _identity, v, out, 0.0, 0.0, self.cycle)[0]
+        return gm.solve(sg.A.matvec, None, v, out, 0.0, 0.0, self.cycle)[0]
 
     def apply(self, pc, x, y):
         self.step.single_iterations += self.run(x.getArray(readonly=True), y.getArray())
