@@ -12,9 +12,11 @@ the innermost Python frame and the native libraries below it:
   transposes  anything under SlabFFT._a2b / _b2a (the Alltoallw transposes, their memory copies)
   pair rest   other native code under the pair's own frames (SlabFFT.apply, _forward_into,
               _backward_from_B, pfft._run): the multiply, the 1/N^2 scaling, memory copies
-  numpy       numpy elsewhere (restriction to the contact set, measures, residual)
+  numpy       numpy elsewhere (restriction to the contact set, measures, residual), its own OpenBLAS
+              included (libscipy_openblas: the float32 Gram-Schmidt of single.py, whose samples
+              show the BLAS kernel right under the Python frame)
   mpi         MPI elsewhere (fft.sum reductions, allreduce)
-  petsc       PETSc native code (Krylov vector work, SNES)
+  petsc       PETSc native code (Krylov vector work, SNES) and the BLAS it links
   python      the interpreter itself
   other       the rest
 
@@ -47,7 +49,7 @@ def classify(frames):
         return "fftw"
     if native and python is not None and _PAIR_FRAME.match(python):
         return "pair rest"
-    if re.search(r"multiarray|umath|numpy", libs, re.I):
+    if re.search(r"multiarray|umath|numpy|scipy_openblas", libs, re.I):
         return "numpy"
     if re.search(r"libmpi|mpich|libuc[pst]|fabric", libs, re.I):
         return "mpi"
