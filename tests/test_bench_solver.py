@@ -91,7 +91,8 @@ def test_profile_shares_classifies_py_spy_stacks(tmp_path):
         top + "SlabFFT.apply (vecontact/core/pfft.py:364);multiply (numpy/_core/_multiarray_umath.so) 1",
         top + "ContactOperator.measures (vecontact/solver/operator.py:137);"
               "minimum (numpy/_core/_multiarray_umath.so) 3",
-        top + "SingleGMRES._dots (vecontact/solver/single.py:84);sgemv_kernel_4x4 (libscipy_openblas64_-32a4b2a6.so) 1",
+        top + "SingleGMRES._dots (vecontact/solver/single.py:84);"
+              "sgemv_kernel_4x4 (libscipy_openblas64_-32a4b2a6.so) 1",
         top + "SlabFFT._allsum (vecontact/core/pfft.py:428);PMPI_Reduce (libmpi.so.12) 1",
         top + "ncp_solve (vecontact/solver/snes.py:251);VecMAXPY_Seq (libpetsc.so.3.26) 4",
         top + "ncp_solve (vecontact/solver/snes.py:251) 2",

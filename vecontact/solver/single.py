@@ -158,16 +158,16 @@ class SingleGMRES:
             y = np.zeros(k)
             for i in range(k - 1, -1, -1):
                 y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
-            if B is None:
-                np.dot(y.astype(np.float32), V[:k], out=t)
-                x += t
-            elif self.flexible:
+            if self.flexible and B is not None:
                 np.dot(y.astype(z.dtype), self.Z[:k], out=z)
                 x += z
             else:
                 np.dot(y.astype(np.float32), V[:k], out=t)
-                B(t, z)
-                x += z
+                if B is None:
+                    x += t
+                else:
+                    B(t, z)
+                    x += z
             if done:
                 return its, res
             # restart: the residual of the float64 right-hand side

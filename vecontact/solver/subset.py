@@ -25,10 +25,10 @@ def gather(full, idx, out):
 
 
 class Grid:
-    """Where a Restricted product (and vi.py's sub-matrix product) is formed: a SlabFFT (a step's, or its single-precision twin), its
-    real buffer ``buf`` (zero outside the points of the last ``scatter``), the whole-grid product
-    ``out``, a scratch of their dtype (``gathered``) for products wanted in the other precision, and the
-    multipliers cast to its precision (``cast``, one copy each)."""
+    """Where a Restricted product (and vi.py's sub-matrix product) is formed: a SlabFFT (a step's, or
+    its single-precision twin), its real buffer ``buf`` (zero outside the points of the last
+    ``scatter``), the whole-grid product ``out``, a scratch of their dtype (``gathered``) for products
+    wanted in the other precision, and the multipliers cast to its precision (``cast``, one copy each)."""
 
     def __init__(self, fft):
         self.fft = fft
