@@ -9,6 +9,11 @@ vectors that is a product u = h @ V, a subtraction and a norm: three passes over
 and u's stay in cache.  Both run side by side on the same float32 data (n local entries, basis of k
 vectors: a free set of 72 % of 4096^2 on 2 ranks is 6e6), fastest of --repeats; printed per k: the
 milliseconds of each, their ratio, and the block sizes 2^15 ... 2^19 (the default is marked).
+
+Then per k, one iteration's orthogonalisation as ``SingleGMRES.solve`` does it (the products ``_dots``
+and the blocked update) against the same plus the pass that normalised the new vector into the next
+basis row (t / |t| -> V[k]), which the unnormalised basis of session 39 no longer makes; the two
+run in turn, fastest of 3 x --repeats each.
 """
 import argparse
 import os
@@ -29,6 +34,17 @@ def _fastest(f, repeats):
         f()
         best = min(best, time.perf_counter() - t0)
     return best * 1e3
+
+
+def _alternating(f, g, repeats):
+    """The fastest of ``repeats`` runs of f and of g (ms), run in turn so that both see the same drift."""
+    best = [float("inf"), float("inf")]
+    for _ in range(repeats):
+        for i, h in enumerate((f, g)):
+            t0 = time.perf_counter()
+            h()
+            best[i] = min(best[i], time.perf_counter() - t0)
+    return best[0] * 1e3, best[1] * 1e3
 
 
 def main():
@@ -62,6 +78,20 @@ def main():
             row.append(f"{b}{'*' if b == default else ''}: {ms:.1f} ({ms / ref:.2f}x)")
         single._BLOCK = default
         print(f"k = {k:3d}  whole vectors {ref:.1f}  blocks " + "  ".join(row), flush=True)
+        g = SingleGMRES(args.n, 2, gm.allsum)
+        dst = np.empty_like(t)
+
+        def iteration():
+            g._dots(V, t)
+            g._subtract(V, h, t)
+
+        def normalised():
+            iteration()
+            np.multiply(t, np.float32(0.5), out=dst)
+
+        a, b = _alternating(iteration, normalised, 3 * args.repeats)
+        print(f"        an iteration's orthogonalisation {a:.1f}; with the normalisation pass {b:.1f} "
+              f"(unnormalised / normalised {a / b:.2f}x)", flush=True)
 
 
 if __name__ == "__main__":

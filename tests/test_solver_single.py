@@ -141,6 +141,44 @@ def test_single_gmres_without_preconditioner_skips_only_a_copy():
     assert np.linalg.norm(b - A @ runs[3][2]) <= (1.05e-3 + 1e-4) * np.linalg.norm(b)
 
 
+def test_single_gmres_rescales_its_rows_exactly(monkeypatch):
+    """The basis rows are kept unnormalised (row i = s_i v_i) and multiplied by a power of two when
+    their scale leaves [2^-_RANGE, 2^_RANGE].  Such a product rounds nothing, so rescaling at nearly
+    every iteration (_RANGE 2) gives the same iterations, residual estimates and solution, bit for bit,
+    as never rescaling (_RANGE 120: unpreconditioned, this operator's rows grow by up to 2^7 an
+    iteration, so restarts every 4 keep them inside float32's range)."""
+    import vecontact.solver.single as single
+    A, _, b = _system(seed=11)
+    opA, _ = _ops(A, A)
+    runs = []
+    for rng_ in (2, 120):
+        monkeypatch.setattr(single, "_RANGE", rng_)
+        gm = SingleGMRES(b.size, 4, _allsum)
+        x = np.empty_like(b)
+        its, _ = gm.solve(opA, None, b, x, 1e-3, 0.0, 40)
+        runs.append((its, list(gm.history), x, gm.rescales))
+    (i1, h1, x1, r1), (i2, h2, x2, r2) = runs
+    assert r1 >= i1 - i1 // 4 - 2 and r2 == 0
+    assert i1 == i2 == 40 and h1 == h2 and np.array_equal(x1, x2)
+
+
+def test_single_gmres_rescaling_keeps_large_operators_finite():
+    """An operator 2^20 times larger (rows growing by ~2^26 an iteration) would overflow float32
+    within five unnormalised rows; with the default _RANGE the rows are rescaled and the solve
+    matches the unscaled operator's (scaled by 2^-20) to float32 rounding."""
+    A, B, b = _system(seed=4)
+    xs = []
+    for f in (1.0, 2.0 ** 20):
+        gm = SingleGMRES(b.size, 30, _allsum)
+        x = np.empty_like(b)
+        its, _ = gm.solve(*_ops(f * A, B), b, x, 1e-5, 0.0, 200)
+        xs.append((f * x, gm.rescales, its))
+    (x1, r1, i1), (x2, r2, i2) = xs
+    assert r2 > 0 and np.all(np.isfinite(x2)) and abs(i1 - i2) <= 1
+    assert np.linalg.norm(b - A @ x2) <= 1.5e-5 * np.linalg.norm(b)
+    assert np.linalg.norm(x2 - x1) <= 1e-4 * np.linalg.norm(x1)
+
+
 def test_single_gmres_subtract_in_blocks(monkeypatch):
     """The Gram-Schmidt update t -= h @ V a block at a time, with the norm of the result: against
     float64 arithmetic, over whole blocks and a partial last one (a block of 2 chunks here).  t's

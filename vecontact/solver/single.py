@@ -33,6 +33,9 @@ _CHUNK = 8192
 # entries of a vector orthogonalised at a time (_subtract; a multiple of _CHUNK, so that its norm sums
 # as _dots does): the fastest of 2^15-2^19 in RESULTS.md, "The Gram-Schmidt update in blocks"
 _BLOCK = 32 * _CHUNK
+# a basis row is rescaled by a power of two when its scale |row| leaves [2^-_RANGE, 2^_RANGE] (solve):
+# far inside float32's range for the products of _dots, rare in practice
+_RANGE = 32
 
 
 class SingleGMRES:
@@ -58,18 +61,18 @@ class SingleGMRES:
         basis_store = np.empty(nb, dtype=np.float32) if basis_store is None else basis_store
         work_store = np.empty(nw, dtype=work) if work_store is None else work_store
         self.V = basis_store[:(m + 1) * n].reshape(m + 1, n)
-        self.t = basis_store[(m + 1) * n:(m + 2) * n]
-        self.u = basis_store[(m + 2) * n:(m + 2) * n + min(n, _BLOCK)]
+        self.u = basis_store[(m + 1) * n:(m + 1) * n + min(n, _BLOCK)]
         self.z = work_store[:n]
         self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
+        self.rescales = 0     # basis rows rescaled by a power of two (solve), over all solves
         self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
 
     @staticmethod
     def sizes(n_loc, restart, flexible):
-        """Entries of the float32 basis memory (the basis, the operator's product t, and _subtract's
-        block) and of the work memory."""
+        """Entries of the float32 basis memory (the basis, whose last row takes the operator's
+        product, and _subtract's block) and of the work memory."""
         n = int(n_loc)
-        return (restart + 2) * n + min(n, _BLOCK), (restart + 1 if flexible else 1) * n
+        return (restart + 1) * n + min(n, _BLOCK), (restart + 1 if flexible else 1) * n
 
     def _dots(self, M, v):
         """M @ v (float32), summed in float32 over chunks of _CHUNK entries and in float64 over the
@@ -107,8 +110,14 @@ class SingleGMRES:
     def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
         (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
-        estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy)."""
-        V, z, t = self.V, self.z, self.t
+        estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy).
+
+        The basis is kept unnormalised: row i holds s_i v_i, v_i the orthonormal Arnoldi vector and
+        s_i = |row i| (float64, s_0 = 1), so the operator's product, written into the next row, is
+        orthogonalised in place and never divided by its norm (a pass over the vector saved; the
+        scales enter the few Gram-Schmidt coefficients, H and y instead).  A row whose scale leaves
+        [2^-_RANGE, 2^_RANGE] is multiplied by a power of two, which rounds nothing."""
+        V, z = self.V, self.z
         x[...] = 0.0
         r = b
         its = 0
@@ -126,6 +135,7 @@ class SingleGMRES:
             cs, sn = np.zeros(m), np.zeros(m)
             g = np.zeros(m + 1)
             g[0] = beta
+            s = np.ones(m + 1)
             k = 0
             while k < m:
                 if B is None:
@@ -133,10 +143,13 @@ class SingleGMRES:
                 else:
                     zk = self.Z[k] if self.flexible else z
                     B(V[k], zk)
-                A(zk, t)
-                h = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
-                hn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], h.astype(np.float32), t)])[0]))
-                H[:k + 1, k] = h
+                t = V[k + 1]
+                A(zk, t)                                   # s_k A B v_k
+                dv = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
+                sk = s[:k + 1]
+                tn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], (dv / sk**2).astype(np.float32), t)])[0]))
+                hn = tn / s[k]
+                H[:k + 1, k] = dv / (sk * s[k])
                 H[k + 1, k] = hn
                 for i in range(k):                         # earlier Givens rotations
                     a0, a1 = H[i, k], H[i + 1, k]
@@ -153,15 +166,22 @@ class SingleGMRES:
                 done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
                 if done:
                     break
-                np.multiply(t, 1.0 / hn, out=V[k])
-            # x += B (V_k y),  H_k y = g_k (upper triangular after the rotations)
+                s[k] = tn
+                e = math.frexp(tn)[1]
+                if abs(e) > _RANGE:
+                    t *= np.float32(math.ldexp(1.0, -e))
+                    s[k] = math.ldexp(tn, -e)
+                    self.rescales += 1
+            # x += B (V_k y),  H_k y = g_k (upper triangular after the rotations); row k is free
             y = np.zeros(k)
             for i in range(k - 1, -1, -1):
                 y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
+            y /= s[:k]
             if self.flexible and B is not None:
                 np.dot(y.astype(z.dtype), self.Z[:k], out=z)
                 x += z
             else:
+                t = V[k]
                 np.dot(y.astype(np.float32), V[:k], out=t)
                 if B is None:
                     x += t
@@ -172,5 +192,5 @@ class SingleGMRES:
                 return its, res
             # restart: the residual of the float64 right-hand side
             np.copyto(z, x, casting="same_kind")
-            A(z, t)
-            r = b - t
+            A(z, V[0])
+            r = b - V[0]
