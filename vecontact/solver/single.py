@@ -147,10 +147,10 @@ class SingleGMRES:
                 t = V[k + 1]
                 A(zk, t)                                   # s_k A B v_k
                 dv = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
-                sk = s[:k + 1]
-                tn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], (dv / sk**2).astype(np.float32), t)])[0]))
+                si = s[:k + 1]                             # the lengths s_i of rows 0..k
+                tn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], (dv / si**2).astype(np.float32), t)])[0]))
                 hn = tn / s[k]
-                H[:k + 1, k] = dv / (sk * s[k])
+                H[:k + 1, k] = dv / (si * s[k])
                 H[k + 1, k] = hn
                 for i in range(k):                         # earlier Givens rotations
                     a0, a1 = H[i, k], H[i + 1, k]
