@@ -15,10 +15,9 @@ GB = 1e9
 def test_case_bytes_covers_the_measured_peaks():
     # the largest peak RSS per rank measured at 4096² with the arrays of session 37 (benchmarks/RESULTS.md,
     # "Memory per grid point" and "4096² with the session-39 default"; kB of 1024 bytes): on 1 rank the
-    # VmHWM of the study's farm rank 0 (its coordinator thread too) after its 1 and 10 m/s cases
-    # (session 40; /usr/bin/time gave 7941832 for one 10 m/s, 27 % solve); on 2 the VmHWM of a
-    # benchmark worker that solved 27 % and 56 % at 0.01 and 10 m/s (session 38).  The estimate bounds
-    # each, within 30 %
+    # larger VmHWM of the study's two farm ranks over session 40's 1 and 10 m/s cases (/usr/bin/time
+    # gave 7941832 for one 10 m/s, 27 % solve); on 2 the VmHWM of a benchmark worker that solved 27 %
+    # and 56 % at 0.01 and 10 m/s (session 38).  The estimate bounds each, within 30 %
     peaks = {1: 7951628 * 1024, 2: 5320328 * 1024}
     for g, peak in peaks.items():
         est = memory.case_bytes(4096, g)
