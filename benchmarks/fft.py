@@ -14,6 +14,12 @@ times, at one N, the stages of a 2-rank pair one by one (a barrier before each, 
 counts, minimum over repeats): the row r2c, the Alltoallw of subarray datatypes, the column FFT, and
 back; next to them the same transpose done as numpy packing into contiguous blocks + ``Alltoall``; and,
 single-process, the raw pyfftw pair on 1 and on 2 threads.  Last line: JSON of every stage (ms).
+
+``--precisions N`` times, at one N on 1 and on 2 ranks, the pairs a solve can run: float64, float32,
+and the two mixed ones of ``SlabFFT.apply_across`` (float64 forward + float32 backward, float32 forward
++ float64 backward; SolverSettings.mixed_pairs), in turn for three rounds (the slowest rank counts,
+minimum over repeats and rounds), and prints each as a ratio to the float64 pair of the same run.
+Last line: JSON of the times (ms) and ratios.
 """
 import argparse
 import json
@@ -47,6 +53,11 @@ def worker(args):
     comm = MPI.COMM_WORLD
     flag = {"estimate": "FFTW_ESTIMATE", "measure": "FFTW_MEASURE", "patient": "FFTW_PATIENT"}[args.planner]
     out = {"size": comm.size, "results": []}
+    if args.precisions:
+        out.update(_precisions(comm, args.precisions, args.planner, args.budget))
+        if comm.rank == 0:
+            print("RESULT " + json.dumps(out), flush=True)
+        return
     if args.breakdown:
         out.update(_breakdown(comm, args.breakdown, args.planner, flag, args.budget))
         if comm.rank == 0:
@@ -209,6 +220,33 @@ def _breakdown(comm, N, planner, flag, budget):
     return {f"{k}_ms": 1e3 * _stage_min(comm, fn, reps) for k, fn in stages.items()}
 
 
+PRECISIONS = ("double", "single", "f64_forward_f32_backward", "f32_forward_f64_backward")
+
+
+def _precisions(comm, N, planner, budget):
+    """Minimum times (ms) of the four pairs of PRECISIONS on this communicator, in turn for three rounds."""
+    import numpy as np
+    from vecontact.core.pfft import SlabFFT
+    fft = SlabFFT(comm, N, threads=1, planner=planner)
+    one = fft.single()
+    rng = np.random.default_rng(comm.rank)
+    x64, y64 = fft.real_array(), fft.real_array()
+    x64[...] = rng.standard_normal(x64.shape)
+    x32, y32 = one.real_array(), one.real_array()
+    x32[...] = x64
+    m64 = 1.0 + rng.random(fft.local_fourier_shape) + 0.5j
+    m32 = m64.astype(np.complex64)
+    pairs = dict(zip(PRECISIONS, (lambda: fft.apply(x64, m64, y64), lambda: one.apply(x32, m32, y32),
+                                  lambda: fft.apply_across(one, x64, m64, y32),
+                                  lambda: one.apply_across(fft, x32, m64, y64))))
+    reps = _repeats(_stage_min(comm, pairs["double"], 1), budget / len(pairs))
+    best = {k: float("inf") for k in pairs}
+    for _ in range(3):
+        for k, fn in pairs.items():
+            best[k] = min(best[k], 1e3 * _stage_min(comm, fn, reps))
+    return {f"{k}_ms": v for k, v in best.items()}
+
+
 def launch(n, extra):
     sys.path.insert(0, os.path.join(ROOT, "tests"))
     from mpi_util import run_mpi  # noqa: E402
@@ -229,6 +267,8 @@ def main():
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--raw", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--mem", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--precisions", type=int, default=0, metavar="N",
+                    help="float64, float32 and mixed pairs at N on 1 and 2 ranks (see above)")
     ap.add_argument("--breakdown", type=int, default=0, metavar="N",
                     help="stage times of a 2-rank pair at N (see above) instead of the size table")
     args = ap.parse_args()
@@ -243,6 +283,18 @@ def main():
             sys.stderr.flush()
             MPI.COMM_WORLD.Abort(1)
 
+    if args.precisions:
+        extra = ["--precisions", str(args.precisions), "--planner", args.planner, "--budget", str(args.budget)]
+        res = {"N": args.precisions, "planner": args.planner}
+        print(f"N={args.precisions}, planner={args.planner}: minimum pair times (ms) and ratio to the float64 pair")
+        for n in (1, 2):
+            r = launch(n, extra)
+            for k in PRECISIONS:
+                t, ratio = r[k + "_ms"], r[k + "_ms"] / r["double_ms"]
+                print(f"  {n} rank{'s' if n > 1 else ' '} {k:26s} {t:10.2f} {ratio:7.3f}")
+                res[f"{k}_ms_{n}rank"], res[f"{k}_ratio_{n}rank"] = round(t, 3), round(ratio, 4)
+        print(json.dumps(res))
+        return
     if args.breakdown:
         extra = ["--breakdown", str(args.breakdown), "--planner", args.planner, "--budget", str(args.budget)]
         one, two = launch(1, extra), launch(2, extra)

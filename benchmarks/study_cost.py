@@ -15,7 +15,13 @@ Output: tables, then as LAST line one JSON object with ``core_hours`` per N, con
 planned cases converged) and, with a reference, ``compared``, ``max_points``, ``max_mu_rel`` and
 ``ratios`` per N (``pairs`` and ``core_hours``: this file's sums over the reference's, same cases;
 ``machine``: the time ratio over the cases whose FFT pairs are equal in both, i.e. solved the same
-way, which measures the two runs' machines; ``core_hours_same_machine``: core_hours / machine).
+way, which measures the two runs' machines; ``core_hours_same_machine``: core_hours at the
+reference's machine speed; ``cases`` and ``same_path``: the compared cases and those with equal
+pairs) and ``runs`` (the same ratios for each run of this file, keyed by its ``/runs`` index; the
+table shows the run's commit and start).  A file resumed in several runs (several sessions) can have
+a different machine speed in each: ``core_hours_same_machine`` divides each run's core-seconds by
+that run's own ``machine`` (null when a run has no same-path case), while ``machine`` stays the
+ratio over all runs' same-path cases together.  The reference's runs count as one machine.
 ``--machine-commit PREFIX`` keeps only this file's rows solved by a commit starting with PREFIX in
 ``machine``: a later code version can take the same path at another speed.
 """
@@ -34,16 +40,17 @@ KEY = ("q1", "seed", "velocity", "pressure")
 
 
 def load(path):
-    """(/cases structured array, {run index: git commit}, {N: cases the job plans}) of a results file
-    (read by :func:`vecontact.status.read_status`)."""
+    """(/cases structured array, {run index: git commit}, {N: cases the job plans}, {run index: start
+    time}) of a results file (read by :func:`vecontact.status.read_status`)."""
     st = read_status(path)
     runs = {int(r["run"]): str(r.get("git_commit") or "?")[:10] for r in st["runs"]}
+    started = {int(r["run"]): str(r.get("started") or "?") for r in st["runs"]}
     q1s = [q1 for q1, *_ in st["expected"]]
     grids = {q1: st["job"].surface.grid(q1) for q1 in set(q1s)}    # once per q1 (a height file is read)
     planned = {}
     for q1 in q1s:
         planned[grids[q1]] = planned.get(grids[q1], 0) + 1
-    return st["cases"], runs, planned
+    return st["cases"], runs, planned, started
 
 
 def cost(cases, runs):
@@ -67,12 +74,13 @@ SAME_PATH_RTOL = 1e-9   # FFT pairs equal to this: the case took the same path t
 
 
 def compare(cases, ref, machine=None):
-    """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums) with
-    sums[(N, velocity)] = array [cases, pairs here, pairs in ref, core-seconds here, core-seconds in ref,
-    the same two core-seconds over the cases whose FFT pairs are equal in both files and, if given,
-    whose entry of the bool array ``machine`` (aligned with ``cases``) is True]."""
+    """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums, by_run)
+    with sums[(N, velocity)] = array [cases, pairs here, pairs in ref, core-seconds here, core-seconds
+    in ref, the same two core-seconds over the cases whose FFT pairs are equal in both files and, if
+    given, whose entry of the bool array ``machine`` (aligned with ``cases``) is True], and by_run[(N,
+    run)] the same sums over this file's cases of each run (its ``/cases`` column ``run``)."""
     index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
-    n, points, mu, sums = 0, 0.0, 0.0, {}
+    n, points, mu, sums, by_run = 0, 0.0, 0.0, {}, {}
     usable = np.ones(len(cases), dtype=bool) if machine is None else np.asarray(machine, dtype=bool)
     for r, use in zip(cases[cases["converged"] == 1], usable[cases["converged"] == 1]):
         o = index.get(tuple(float(r[k]) for k in KEY))
@@ -83,24 +91,36 @@ def compare(cases, ref, machine=None):
         mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
         here, there = float(r["seconds"] * r["ranks"]), float(o["seconds"] * o["ranks"])
         same = use and abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
-        row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same], dtype=float)
+        row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same, same],
+                       dtype=float)
         key = (int(r["N"]), float(r["velocity"]))
         sums[key] = sums.get(key, 0.0) + row
-    return n, points, mu, sums
+        key = (int(r["N"]), int(r["run"]))
+        by_run[key] = by_run.get(key, 0.0) + row
+    return n, points, mu, sums, by_run
 
 
-def ratios(sums):
-    """Per N over every velocity of ``sums`` (compare): ``pairs`` and ``core_hours`` (here / ref),
-    ``machine`` (core-seconds here / ref over the same-path cases: the two machines' speed ratio, null
-    without such cases) and ``core_hours_same_machine`` (core_hours / machine)."""
+def _ratios(t):
+    """``pairs``, ``core_hours`` (here / ref), ``machine`` (core-seconds here / ref over the same-path
+    cases: the two machines' speed ratio, null without such cases) of one array of compare's sums."""
+    machine = float(t[5] / t[6]) if t[6] > 0 else None
+    return dict(cases=int(t[0]), same_path=int(t[7]), pairs=float(t[1] / t[2]), core_hours=float(t[3] / t[4]),
+                machine=machine)
+
+
+def ratios(sums, by_run):
+    """Per N over every velocity of ``sums`` and every run of ``by_run`` (compare): :func:`_ratios`,
+    ``core_hours_same_machine`` (this file's core-seconds, each run's divided by its own ``machine``,
+    over the reference's; null if a run has no same-path case) and ``runs`` ({run: _ratios})."""
     out = {}
     for (N, _), s in sums.items():
         out[N] = out.get(N, 0.0) + s
     res = {}
     for N, t in out.items():
-        machine = float(t[5] / t[6]) if t[6] > 0 else None
-        res[N] = dict(pairs=float(t[1] / t[2]), core_hours=float(t[3] / t[4]), machine=machine,
-                      core_hours_same_machine=float(t[3] / t[4] / machine) if machine else None)
+        runs = {run: _ratios(s) for (n, run), s in sorted(by_run.items()) if n == N}
+        at_ref_speed = [by_run[N, run][3] / r["machine"] if r["machine"] else None for run, r in runs.items()]
+        res[N] = dict(_ratios(t), runs=runs,
+                      core_hours_same_machine=None if None in at_ref_speed else float(sum(at_ref_speed) / t[4]))
     return res
 
 
@@ -112,7 +132,7 @@ def main(argv=None):
     ap.add_argument("--machine-commit", metavar="PREFIX",
                     help="only this file's rows solved by a commit starting with PREFIX measure the machines")
     args = ap.parse_args(argv)
-    cases, runs, planned = load(args.results)
+    cases, runs, planned, started = load(args.results)
     rows, per_n, count = cost(cases, runs)
     print(f"{'N':>5s} {'commit':10s} {'converged':>9s} {'failed':>6s} {'core-h':>8s} {'median pairs':>12s}")
     for N, commit, ok, bad, hours, pairs in rows:
@@ -122,22 +142,32 @@ def main(argv=None):
     out = dict(core_hours=per_n, cases=count, planned=planned, n=args.n,
                core_hours_n=per_n.get(args.n) if complete else None)
     if args.reference:
-        ref, _, _ = load(args.reference)
+        ref = load(args.reference)[0]
         machine = None
         if args.machine_commit:
             machine = np.array([runs.get(int(r), "?").startswith(args.machine_commit) for r in cases["run"]])
-        n, points, mu, sums = compare(cases, ref, machine)
+        n, points, mu, sums, by_run = compare(cases, ref, machine)
         print(f"against {args.reference}: {n} cases in both, max |dA| {points:.0f} points, max |dmu|/mu {mu:.1e}")
         print(f"{'N':>5s} {'v (m/s)':>8s} {'cases':>5s} {'pairs':>9s} {'ref pairs':>9s} {'ratio':>6s} "
               f"{'core-h':>7s} {'ref core-h':>10s} {'ratio':>6s}")
         for (N, v), s in sorted(sums.items()):
             print(f"{N:5d} {v:8g} {int(s[0]):5d} {s[1]:9.1f} {s[2]:9.1f} {s[1] / s[2]:6.3f} "
                   f"{s[3] / 3600:7.3f} {s[4] / 3600:10.3f} {s[3] / s[4]:6.3f}")
-        rat = ratios(sums)
+        rat = ratios(sums, by_run)
+        print("per run of this file (machine: its same-path cases' time over the reference's):")
+        print(f"{'N':>5s} {'run':>4s} {'commit':10s} {'started':25s} {'cases':>5s} {'pairs':>6s} "
+              f"{'core-h':>6s} {'same-path':>9s} {'machine':>7s}")
+        for N, r in sorted(rat.items()):
+            for run, q in r["runs"].items():
+                m = "n/a" if q["machine"] is None else f"{q['machine']:.3f}"
+                print(f"{N:5d} {run:4d} {runs.get(run, '?'):10s} {started.get(run, '?'):25s} {q['cases']:5d} "
+                      f"{q['pairs']:6.3f} {q['core_hours']:6.3f} {q['same_path']:9d} {m:>7s}")
         for N, r in sorted(rat.items()):
             if r["machine"] is not None:
-                print(f"{N:5d}: same-path cases (equal FFT pairs) took {r['machine']:.3f}x the reference's "
-                      f"time, so at the reference's speed the core-hours ratio is {r['core_hours_same_machine']:.3f}")
+                print(f"{N:5d}: same-path cases (equal FFT pairs) took {r['machine']:.3f}x the reference's time")
+            if r["core_hours_same_machine"] is not None:
+                print(f"{N:5d}: at the reference's speed (each run by its own machine ratio) the core-hours "
+                      f"ratio is {r['core_hours_same_machine']:.3f}")
         out.update(compared=n, max_points=points, max_mu_rel=mu, ratios=rat)
     print(json.dumps(out))
     return 0

@@ -32,6 +32,11 @@ def test_scale_and_release_arrays_one_rank(N):
     pfft_check.check_scale_and_release(MPI.COMM_WORLD if MPI.COMM_WORLD.size == 1 else MPI.COMM_SELF, N)
 
 
+@pytest.mark.parametrize("N", pfft_check.SIZES)
+def test_apply_across_precisions_one_rank(N):
+    pfft_check.check_across(MPI.COMM_WORLD if MPI.COMM_WORLD.size == 1 else MPI.COMM_SELF, N)
+
+
 @pytest.mark.parametrize("nprocs", [2, 3, 4])
 def test_matches_numpy_mpi(nprocs):
     # 4 ranks oversubscribe the 2 cores: N <= 64 only

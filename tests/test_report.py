@@ -198,12 +198,45 @@ def test_study_cost_benchmark(study_files, tmp_path):
     assert res["ratios"]["64"]["machine"] is None and res["ratios"]["64"]["core_hours_same_machine"] is None
     assert abs(res["ratios"]["128"]["core_hours_same_machine"] - 1) <= 1e-12
     # --machine-commit: rows of other commits do not measure the machines
+    from vecontact.io.results import read_strings
     from vecontact.status import read_status
     commit = str(read_status(str(out))["runs"][0].get("git_commit") or "?")
     res = run(out, "--reference", str(ref), "--machine-commit", commit[:7])
     assert abs(res["ratios"]["128"]["machine"] - 1) <= 1e-12
     res = run(out, "--reference", str(ref), "--machine-commit", "no-such-commit")
     assert res["ratios"]["128"]["machine"] is None and abs(res["ratios"]["128"]["core_hours"] - 1) <= 1e-12
+    # a file resumed in two runs on machines of different speed: run 1 (every other 64^2 case) took twice
+    # the time on the same path; each run is measured against its own same-path cases
+    two = tmp_path / "two.h5"
+    shutil.copy(out, two)
+    with h5py.File(two, "r+") as f:
+        c = f["cases"][()]
+        later = np.flatnonzero(c["N"] == 64)[1::2]
+        c["run"][later] = 1
+        c["seconds"][later] *= 2
+        del f["cases"]
+        f.create_dataset("cases", data=c)
+        runs = [json.loads(r) for r in read_strings(f, "runs")]
+        runs.append(dict(runs[0], run=1, git_commit="f" * 40, started="later"))
+        del f["runs"]
+        f.create_dataset("runs", data=np.array([json.dumps(r) for r in runs], dtype=object),
+                         dtype=h5py.string_dtype())
+    res = run(two, "--reference", str(out))
+    r64 = res["ratios"]["64"]
+    assert set(r64["runs"]) == {"0", "1"} and r64["runs"]["1"]["cases"] == later.size == r64["runs"]["1"]["same_path"]
+    assert abs(r64["runs"]["0"]["machine"] - 1) <= 1e-12 and abs(r64["runs"]["1"]["machine"] - 2) <= 1e-12
+    assert 1.1 < r64["machine"] < 1.9 and r64["core_hours"] > 1.1   # the two runs mixed
+    assert abs(r64["core_hours_same_machine"] - 1) <= 1e-12         # each run at the reference's speed
+    assert list(res["ratios"]["128"]["runs"]) == ["0"]
+    # a run none of whose cases took the reference's path: no speed for it, so no corrected total
+    with h5py.File(two, "r+") as f:
+        c = f["cases"][()]
+        c["fft_pairs"][later] += 1
+        del f["cases"]
+        f.create_dataset("cases", data=c)
+    r64 = run(two, "--reference", str(out))["ratios"]["64"]
+    assert r64["runs"]["1"]["machine"] is None and r64["runs"]["1"]["same_path"] == 0
+    assert r64["core_hours_same_machine"] is None and abs(r64["machine"] - 1) <= 1e-12
     partial = tmp_path / "partial.h5"
     shutil.copy(out, partial)
     with h5py.File(partial, "r+") as f:

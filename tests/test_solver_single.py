@@ -213,20 +213,26 @@ def _solve(N, v, sigma0, options):
     return r, fft.gather(r.pressure > 0), (fft.single_transforms - t0) / 2
 
 
-@pytest.mark.parametrize("sigma0, mode, range_max", [(1.0e6, "free", 1e30), (1.0e5, "contact", 1e30),
-                                                     (1.0e6, "free", 1.0), (1.0e5, "contact", 1.0)])
-def test_single_steps_same_solution(sigma0, mode, range_max):
+@pytest.mark.parametrize("sigma0, mode, range_max, mixed", [
+    (1.0e6, "free", 1e30, "on"), (1.0e5, "contact", 1e30, "on"), (1.0e6, "free", 1.0, "on"),
+    (1.0e5, "contact", 1.0, "on"), (1.0e6, "free", 1.0, "off"), (1.0e5, "contact", 1.0, "off")])
+def test_single_steps_same_solution(sigma0, mode, range_max, mixed):
     """float32 basis with float32 pairs (range_max above the stiffness's range, 4e3 here) and with
-    float64 pairs (range_max 1; the preconditioners' pairs too: pc_range_max)."""
+    float64 pairs (range_max 1; the preconditioners' pairs too: pc_range_max), these with mixed pairs
+    (the operator's backward and the free-set preconditioner's forward transform in float32) or not."""
     one, act1, pairs1 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "single",
                                                    "vc_single_range_max": str(range_max),
-                                                   "vc_pc_range_max": str(range_max)})
+                                                   "vc_pc_range_max": str(range_max), "vc_mixed_pairs": mixed})
     two, act2, pairs2 = _solve(256, 10.0, sigma0, _DOUBLE)
     assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
     assert one.diagnostics["step_modes"][-1][1] == mode
     d1, d2 = one.diagnostics, two.diagnostics
     assert d1["single_iterations"] > 0.3 * one.linear_iterations and d2["single_iterations"] == 0
     assert d1["float32_pairs"] == (range_max > 1) and not d2["float32_pairs"]
+    # mixed pairs: two an iteration of a float32-basis step (operator and preconditioner), at most
+    with_mixed = range_max <= 1 and mixed == "on"
+    assert (d1["mixed_pairs"] >= d1["single_iterations"]) if with_mixed else d1["mixed_pairs"] == 0
+    assert d1["mixed_pairs"] <= 2 * d1["single_iterations"] + 2 * one.iterations and d2["mixed_pairs"] == 0
     assert (pairs1 > 0.3 * one.fft_pairs) if range_max > 1 else pairs1 == 0
     assert pairs2 == 0
     differ = int(np.count_nonzero(act1 != act2))      # points on the contact line may fall either way

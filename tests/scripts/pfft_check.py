@@ -189,12 +189,51 @@ def check_scale_and_release(comm, N):
     one.free()
 
 
+def check_across(comm, N, tol=2e-6):
+    """``apply_across``: the forward transform in one precision and the backward in the twin's.  On a
+    smooth field (long waves) and a multiplier that amplifies short waves by up to ~1e3-1e7, the
+    float64 forward with a float32 backward rounds like the float32 output it writes (within tol of
+    numpy's float64 product, and not exactly it), while rounding the input to float32 first (the float32
+    forward) costs more than ten times as much: the amplified rounding noise that float64 forward
+    transforms avoid (solver/subset.py, Mixed).  Both count as pairs of the double SlabFFT."""
+    fft = SlabFFT(comm, N, planner="estimate", wisdom_file=False)
+    one = fft.single()
+    rs, re_, cs, ce = fft.row_start, fft.row_stop, fft.col_start, fft.col_stop
+    x, y = np.meshgrid(np.arange(N), np.arange(N), indexing="ij")
+    full = np.cos(2 * np.pi * x / N) / 3 + 0.3 * np.sin(2 * np.pi * y / N + 0.1)
+    kx, ky = np.fft.fftfreq(N, 1.0 / N)[:, None], np.arange(N // 2 + 1)[None, :]
+    mult = (1.0 + kx ** 2 + ky ** 2) ** 2 * (1 + 0.5j)
+    ref = np.fft.irfft2(np.fft.rfft2(full) * mult, s=(N, N))[rs:re_]
+    scale = np.max(np.abs(ref))
+    x64, out32 = fft.real_array(), one.real_array()
+    x64[...] = full[rs:re_]
+    x32, out64 = x64.astype(np.float32), fft.real_array()
+    m = np.ascontiguousarray(mult[:, cs:ce])
+    assert fft.apply_across(one, x64, m, out32, scale=0.5) is out32 and out32.dtype == np.float32
+    err = comm.allreduce(float(np.max(np.abs(out32 - 0.5 * ref))), op=MPI.MAX)
+    assert 0 < err < tol * 0.5 * scale, ("across 64 -> 32", N, err / scale)
+    one.apply_across(fft, x32, m, out64)
+    err_in32 = comm.allreduce(float(np.max(np.abs(out64 - ref))), op=MPI.MAX)
+    assert err_in32 > 10 * 2 * err, ("input rounded to float32", N, err_in32 / scale, 2 * err / scale)
+    assert fft.pairs == 2 == fft.n_apply and fft.single_transforms == 0 and one.pairs == 0
+    for args in ((one, x32, m, out32), (one, x64, m, x64)):      # not this SlabFFT's and its twin's arrays
+        try:
+            fft.apply_across(*args)
+        except ValueError:
+            pass
+        else:
+            raise AssertionError("apply_across accepted wrong arrays")
+    fft.free()
+    one.free()
+
+
 def check_all(comm):
     for N in SIZES:
         if comm.size <= N // 2:
             check_one(comm, N)
             check_single(comm, N)
             check_scale_and_release(comm, N)
+            check_across(comm, N)
 
 
 if __name__ == "__main__":

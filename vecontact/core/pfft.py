@@ -433,6 +433,26 @@ class SlabFFT:
         self.n_apply += 1
         return real_out
 
+    def apply_across(self, twin, real_in, multiplier, real_out, scale=1.0):
+        """``apply`` with the forward transform in this SlabFFT's precision and the backward in ``twin``'s
+        (its other-precision twin: same grid and split); counts one pair here.  ``real_in`` and
+        ``real_out`` must be the two precisions' local real arrays, ``multiplier`` is applied in the wider
+        of its and the spectrum's precision.  Where a product's input must not be rounded to float32 but
+        its output may be, or the other way round (solver/subset.py, ``Mixed``).  The pair counts on the
+        double-precision SlabFFT (not in ``single_transforms``)."""
+        dtypes = (getattr(real_in, "dtype", None), getattr(real_out, "dtype", None))
+        if twin.local_fourier_shape != self.local_fourier_shape or dtypes != (self.real_dtype, twin.real_dtype):
+            raise ValueError("apply_across: real_in / real_out must be this SlabFFT's and its twin's arrays")
+        self._check_real(real_in)
+        self._check_real(real_out, "real_out")
+        t0 = time.perf_counter()
+        self._forward_into(real_in, self._B)
+        np.multiply(self._B, multiplier, out=twin._B, casting="same_kind")
+        twin._backward_from_B(real_out, scaled=False, scale=scale)
+        _APPLY_SECONDS[0] += time.perf_counter() - t0
+        (twin if twin.precision == "double" else self).n_apply += 1
+        return real_out
+
     # ------------------------------------------------------------------ wavevectors & multipliers
     def wavevectors(self, L):
         """(qx, qy, q) in 1/m: qx shape (N, 1), qy shape (1, ncols), q = |q| shape local_fourier_shape."""

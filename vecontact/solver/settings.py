@@ -86,6 +86,9 @@ class SolverSettings:
                                            "formed from the preconditioned vectors) [RESULTS.md]", lo=0, hi=1)
     single_range_max: float = _knob(1.5e5, "... with float32 FFT pairs too while max|m_q|/min|m_q| <= this, else "
                                     "float64 pairs and a float32 basis [RESULTS.md]", lo=0)
+    mixed_pairs: str = _knob("on", "on: where their pairs are float64, a float32-basis step's products take "
+                             "the backward (A) or forward (B) transform in float32 (subset.Mixed) [RESULTS.md]",
+                             choices=("on", "off"))
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
                                  "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
                                  choices=("single", "double"))

@@ -146,7 +146,8 @@ class _Semismooth:
         return dict(nchg=self.policy.changes, lin_history=self.lin_history + [linear_iterations], modes=self.modes,
                     measure_checks=self.stop.trace if self.stop is not None else [],
                     single_iterations=sum(s.single_iterations for s in self.steps.values()),
-                    float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()))
+                    float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()),
+                    mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()))
 
     def release(self):
         for step in self.steps.values():

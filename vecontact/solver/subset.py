@@ -15,7 +15,7 @@ from mpi4py import MPI
 
 from vecontact.solver.single import SingleGMRES
 
-__all__ = ["Grid", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
+__all__ = ["Grid", "Mixed", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
 
 
 def gather(full, idx, out):
@@ -58,11 +58,47 @@ class Grid:
             hit = self._casts[id(multiplier)] = (multiplier, m.astype(dtype))
         return hit[1]
 
+    def product(self, multiplier, scale):
+        """``out`` = scale x (multiplier ``buf``) (SlabFFT.apply)."""
+        self.fft.apply(self.buf, multiplier, self.out, scale)
+
     def gathered(self, n):
         """A scratch array of n entries, of the grid's dtype."""
         if self._gathered.size < n:
             self._gathered = np.empty(n, dtype=self.buf.dtype)
         return self._gathered[:n]
+
+
+class Mixed:
+    """A Grid whose products take their forward transform on ``src`` and their backward on ``dst`` (the
+    float64 Grid and the float32 one, either way round; SlabFFT.apply_across): scatter into src's
+    ``buf``, product into dst's ``out``, both Grids' buffers shared (no memory of its own).  The
+    multiplier stays float64 (``cast`` is the identity): the product is rounded to float32 only where
+    the float32 side is (SolverSettings.mixed_pairs).  ``step.mixed_pairs`` counts its products."""
+
+    def __init__(self, src, dst, step):
+        self.src, self.dst, self.step = src, dst, step
+
+    @property
+    def buf(self):
+        return self.src.buf
+
+    @property
+    def out(self):
+        return self.dst.out
+
+    def scatter(self, idx, x):
+        self.src.scatter(idx, x)
+
+    def cast(self, multiplier):
+        return multiplier
+
+    def gathered(self, n):
+        return self.dst.gathered(n)
+
+    def product(self, multiplier, scale):
+        self.src.fft.apply_across(self.dst.fft, self.src.buf, multiplier, self.dst.out, scale)
+        self.step.mixed_pairs += 1
 
 
 class Restricted:
@@ -90,7 +126,7 @@ class Restricted:
         g = self.grid
         idx = self.step.idx
         g.scatter(idx, x)
-        g.fft.apply(g.buf, self.multiplier, g.out, self.scale)
+        g.product(self.multiplier, self.scale)
         if y.dtype == g.out.dtype:
             gather(g.out, idx, y)
         else:                           # take's own casting copies (and casts) y's old contents first
@@ -121,8 +157,15 @@ class _Single:
         self.step = step
         grid = step.float32_grid() if float32_pairs else step.grid
         self.work = grid.buf.dtype.type
-        self.A = step.operator().on(grid)
         self._B_grid = step.float32_grid() if float32_pairs or float32_pc else grid
+        if not float32_pairs and step.settings.mixed_pairs == "on":
+            # float64 pairs only where a float32 rounding would be amplified: A's input (z, a gap on
+            # the free set) and B's output (its z); A's output goes into the float32 basis anyway
+            single = step.work.float32_grid()
+            grid = Mixed(step.grid, single, step)
+            if self._B_grid is step.grid:
+                self._B_grid = Mixed(single, step.grid, step)
+        self.A = step.operator().on(grid)
         self._stores = {}
 
     @cached_property
@@ -230,6 +273,7 @@ class SubsetStep:
         self._cycles = None             # _Single of the float32 cycles (cycle_context)
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
         self.single_iterations = 0      # ... of them with a float32 basis (single.py)
+        self.mixed_pairs = 0            # pairs with one transform in float32 (Mixed)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
         self._A = self._b = self._y = None
