@@ -23,7 +23,8 @@ a different machine speed in each: ``core_hours_same_machine`` divides each run'
 that run's own ``machine`` (null when a run has no same-path case), while ``machine`` stays the
 ratio over all runs' same-path cases together.  The reference's runs count as one machine.
 ``--machine-commit PREFIX`` keeps only this file's rows solved by a commit starting with PREFIX in
-``machine``: a later code version can take the same path at another speed.
+``machine``: a later code version can take the same path at another speed.  It says the runs shared
+one machine, so ``core_hours_same_machine`` then divides every run by that one ratio.
 """
 import argparse
 import json
@@ -108,17 +109,20 @@ def _ratios(t):
                 machine=machine)
 
 
-def ratios(sums, by_run):
+def ratios(sums, by_run, per_run=True):
     """Per N over every velocity of ``sums`` and every run of ``by_run`` (compare): :func:`_ratios`,
     ``core_hours_same_machine`` (this file's core-seconds, each run's divided by its own ``machine``,
-    over the reference's; null if a run has no same-path case) and ``runs`` ({run: _ratios})."""
+    over the reference's; null if a run has no same-path case; without ``per_run``, all of them by the
+    pooled ``machine``) and ``runs`` ({run: _ratios})."""
     out = {}
     for (N, _), s in sums.items():
         out[N] = out.get(N, 0.0) + s
     res = {}
     for N, t in out.items():
         runs = {run: _ratios(s) for (n, run), s in sorted(by_run.items()) if n == N}
-        at_ref_speed = [by_run[N, run][3] / r["machine"] if r["machine"] else None for run, r in runs.items()]
+        at_ref_speed = [by_run[N, run][3] / m if m else None
+                        for run, m in ((run, r["machine"] if per_run else _ratios(t)["machine"])
+                                       for run, r in runs.items())]
         res[N] = dict(_ratios(t), runs=runs,
                       core_hours_same_machine=None if None in at_ref_speed else float(sum(at_ref_speed) / t[4]))
     return res
@@ -153,7 +157,7 @@ def main(argv=None):
         for (N, v), s in sorted(sums.items()):
             print(f"{N:5d} {v:8g} {int(s[0]):5d} {s[1]:9.1f} {s[2]:9.1f} {s[1] / s[2]:6.3f} "
                   f"{s[3] / 3600:7.3f} {s[4] / 3600:10.3f} {s[3] / s[4]:6.3f}")
-        rat = ratios(sums, by_run)
+        rat = ratios(sums, by_run, per_run=not args.machine_commit)
         print("per run of this file (machine: its same-path cases' time over the reference's):")
         print(f"{'N':>5s} {'run':>4s} {'commit':10s} {'started':25s} {'cases':>5s} {'pairs':>6s} "
               f"{'core-h':>6s} {'same-path':>9s} {'machine':>7s}")
@@ -166,8 +170,9 @@ def main(argv=None):
             if r["machine"] is not None:
                 print(f"{N:5d}: same-path cases (equal FFT pairs) took {r['machine']:.3f}x the reference's time")
             if r["core_hours_same_machine"] is not None:
-                print(f"{N:5d}: at the reference's speed (each run by its own machine ratio) the core-hours "
-                      f"ratio is {r['core_hours_same_machine']:.3f}")
+                how = "the --machine-commit rows' ratio" if args.machine_commit else "each run by its own machine ratio"
+                print(f"{N:5d}: at the reference's speed ({how}) the core-hours ratio is "
+                      f"{r['core_hours_same_machine']:.3f}")
         out.update(compared=n, max_points=points, max_mu_rel=mu, ratios=rat)
     print(json.dumps(out))
     return 0

@@ -228,6 +228,10 @@ def test_study_cost_benchmark(study_files, tmp_path):
     assert 1.1 < r64["machine"] < 1.9 and r64["core_hours"] > 1.1   # the two runs mixed
     assert abs(r64["core_hours_same_machine"] - 1) <= 1e-12         # each run at the reference's speed
     assert list(res["ratios"]["128"]["runs"]) == ["0"]
+    # --machine-commit: the user names the rows that measure one machine for all runs
+    r64 = run(two, "--reference", str(out), "--machine-commit", commit[:7])["ratios"]["64"]
+    assert r64["runs"]["1"]["machine"] is None and abs(r64["machine"] - 1) <= 1e-12
+    assert abs(r64["core_hours_same_machine"] - r64["core_hours"]) <= 1e-12
     # a run none of whose cases took the reference's path: no speed for it, so no corrected total
     with h5py.File(two, "r+") as f:
         c = f["cases"][()]
