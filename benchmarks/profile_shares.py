@@ -10,8 +10,8 @@ the innermost Python frame and the native libraries below it:
 
   fftw        FFTW (the row and column transforms of SlabFFT)
   transposes  anything under SlabFFT._a2b / _b2a (the Alltoallw transposes, their memory copies)
-  pair rest   other native code under the pair's own frames (SlabFFT.apply, apply_across, _forward_into,
-              _backward_from_B, pfft._run): the multiply, the 1/N^2 scaling, memory copies
+  pair rest   other native code under the pair's own frames (SlabFFT.apply, apply_across, _pair,
+              _forward_into, _backward_from_B, pfft._run): the multiply, the 1/N^2 scaling, memory copies
   numpy       numpy elsewhere (restriction to the contact set, measures, residual), its own OpenBLAS
               included (libscipy_openblas: the float32 Gram-Schmidt of single.py, whose samples
               show the BLAS kernel right under the Python frame)
@@ -30,7 +30,8 @@ import re
 
 KINDS = ("fftw", "transposes", "pair rest", "numpy", "mpi", "petsc", "python", "other")
 # the pair's own frames, by name and file (a bare "_run" could be any module's)
-_PAIR_FRAME = re.compile(r"(SlabFFT\.(apply|apply_across|_forward_into|_backward_from_B)|_run) \(.*core/pfft\.py:")
+_PAIR_FRAME = re.compile(r"(SlabFFT\.(apply|apply_across|_pair|_forward_into|_backward_from_B)|_run)"
+                         r" \(.*core/pfft\.py:")
 
 
 def classify(frames):

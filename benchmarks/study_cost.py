@@ -119,11 +119,11 @@ def ratios(sums, by_run, per_run=True):
         out[N] = out.get(N, 0.0) + s
     res = {}
     for N, t in out.items():
+        pooled = _ratios(t)
         runs = {run: _ratios(s) for (n, run), s in sorted(by_run.items()) if n == N}
-        at_ref_speed = [by_run[N, run][3] / m if m else None
-                        for run, m in ((run, r["machine"] if per_run else _ratios(t)["machine"])
-                                       for run, r in runs.items())]
-        res[N] = dict(_ratios(t), runs=runs,
+        machines = {run: r["machine"] if per_run else pooled["machine"] for run, r in runs.items()}
+        at_ref_speed = [by_run[N, run][3] / m if m else None for run, m in machines.items()]
+        res[N] = dict(pooled, runs=runs,
                       core_hours_same_machine=None if None in at_ref_speed else float(sum(at_ref_speed) / t[4]))
     return res
 

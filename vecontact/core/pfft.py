@@ -425,17 +425,11 @@ class SlabFFT:
             real_out = self.real_array()
         else:
             self._check_real(real_out, "real_out")
-        t0 = time.perf_counter()
-        self._forward_into(real_in, self._B)
-        np.multiply(self._B, multiplier, out=self._B)
-        self._backward_from_B(real_out, scaled=False, scale=scale)
-        _APPLY_SECONDS[0] += time.perf_counter() - t0
-        self.n_apply += 1
-        return real_out
+        return self._pair(self, real_in, multiplier, real_out, scale)
 
     def apply_across(self, twin, real_in, multiplier, real_out, scale=1.0):
         """``apply`` with the forward transform in this SlabFFT's precision and the backward in ``twin``'s
-        (its other-precision twin: same grid and split); counts one pair here.  ``real_in`` and
+        (its other-precision twin: same grid and split).  ``real_in`` and
         ``real_out`` must be the two precisions' local real arrays, ``multiplier`` is applied in the wider
         of its and the spectrum's precision.  Where a product's input must not be rounded to float32 but
         its output may be, or the other way round (solver/subset.py, ``Mixed``).  The pair counts on the
@@ -445,6 +439,11 @@ class SlabFFT:
             raise ValueError("apply_across: real_in / real_out must be this SlabFFT's and its twin's arrays")
         self._check_real(real_in)
         self._check_real(real_out, "real_out")
+        return self._pair(twin, real_in, multiplier, real_out, scale)
+
+    def _pair(self, twin, real_in, multiplier, real_out, scale):
+        """The pair of ``apply`` (``twin`` is self) and ``apply_across``: forward here, multiply into the
+        twin's B, backward there; timed, and counted on the double-precision one of the two."""
         t0 = time.perf_counter()
         self._forward_into(real_in, self._B)
         np.multiply(self._B, multiplier, out=twin._B, casting="same_kind")
