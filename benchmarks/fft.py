@@ -17,7 +17,9 @@ single-process, the raw pyfftw pair on 1 and on 2 threads.  Last line: JSON of e
 
 ``--precisions N`` times, at one N on 1 and on 2 ranks, the pairs a solve can run: float64, float32,
 and the two mixed ones of ``SlabFFT.apply_across`` (float64 forward + float32 backward, float32 forward
-+ float64 backward; SolverSettings.mixed_pairs), in turn for three rounds (the slowest rank counts,
++ float64 backward; SolverSettings.mixed_pairs) and the float64 and float32 pairs of an input that
+carries the 1/N^2 already (``apply(..., normalised=True)``: no pass over the output; subset.Grid), in
+turn for three rounds (the slowest rank counts,
 minimum over repeats and rounds), and prints each as a ratio to the float64 pair of the same run.
 Last line: JSON of the times (ms) and ratios.
 """
@@ -220,11 +222,12 @@ def _breakdown(comm, N, planner, flag, budget):
     return {f"{k}_ms": 1e3 * _stage_min(comm, fn, reps) for k, fn in stages.items()}
 
 
-PRECISIONS = ("double", "single", "f64_forward_f32_backward", "f32_forward_f64_backward")
+PRECISIONS = ("double", "single", "f64_forward_f32_backward", "f32_forward_f64_backward", "double_normalised",
+              "single_normalised")
 
 
 def _precisions(comm, N, planner, budget):
-    """Minimum times (ms) of the four pairs of PRECISIONS on this communicator, in turn for three rounds."""
+    """Minimum times (ms) of the pairs of PRECISIONS on this communicator, in turn for three rounds."""
     import numpy as np
     from vecontact.core.pfft import SlabFFT
     fft = SlabFFT(comm, N, threads=1, planner=planner)
@@ -238,7 +241,11 @@ def _precisions(comm, N, planner, budget):
     m32 = m64.astype(np.complex64)
     pairs = dict(zip(PRECISIONS, (lambda: fft.apply(x64, m64, y64), lambda: one.apply(x32, m32, y32),
                                   lambda: fft.apply_across(one, x64, m64, y32),
-                                  lambda: one.apply_across(fft, x32, m64, y64))))
+                                  lambda: one.apply_across(fft, x32, m64, y64),
+                                  # the same arrays without the pass over the output (their values do not
+                                  # change the time; arrays allocated later placed differently did)
+                                  lambda: fft.apply(x64, m64, y64, normalised=True),
+                                  lambda: one.apply(x32, m32, y32, normalised=True))))
     reps = _repeats(_stage_min(comm, pairs["double"], 1), budget / len(pairs))
     best = {k: float("inf") for k in pairs}
     for _ in range(3):

@@ -9,7 +9,8 @@ fine grid's Newton iterations (bytes per grid point; a complex half-spectrum arr
 * the steps' one Workspace, shared by both step types: the product's buffer and result and the
   right-hand side work (24), on the contact set also update's s (8) and, where the stiffness's range
   lets the contact set's FGMRES precondition in float32, the float32 Grid (8) and m in float32 (4);
-* the measure stop's g and p (16); the step's index arrays (8 per point of its set).
+* the measure stop's g and p (16); the step's index arrays (8 per point of its set), and the scratch
+  through which a product's input takes the 1/N^2 (subset.Grid.product_of; 8 per point of the contact set).
 
 That is 106 (free-set steps, A/A0 0.88) and 127 (contact-set steps, A/A0 0.19).  Before session 37
 each step type had its own buffers, m / kappa and kappa c were kept as arrays (three of them), the
@@ -19,7 +20,10 @@ Newton state: 211 and 226 bytes a point here (measured), and 6.0 against 4.5 GB 
 (benchmarks/RESULTS.md, "Memory per grid point").
 
 The Krylov bases are left out: ``-vc_changing_precision double -vc_cycle_precision double`` puts them in
-PETSc's Vecs, which tracemalloc does not see (their size is the budgets' business, farm/memory.py).
+PETSc's Vecs, which tracemalloc does not see (their size is the budgets' business, farm/memory.py), and
+``-vc_mixed_reduction_max 0`` keeps the PETSc steps' products in float64, so float64 throughout holds no
+float32 Grid unless the contact set's preconditioner asks for it (with mixed PETSc steps it always holds
+one: 8 more, and the float32 twin's buffers).
 """
 import math
 import tracemalloc
@@ -35,7 +39,7 @@ from vecontact.solver import solve_contact
 
 N = 256
 Q0 = 2.5e5
-DOUBLE_KRYLOV = "-vc_changing_precision double -vc_cycle_precision double"
+DOUBLE_KRYLOV = "-vc_changing_precision double -vc_cycle_precision double -vc_mixed_reduction_max 0"
 
 
 @pytest.mark.parametrize("sigma0, mode, area, bound", [(3e5, "contact", 0.194, 136.0), (2e6, "free", 0.881, 115.0)])

@@ -151,3 +151,34 @@ def test_single_precision_floor_by_mode(mode):
     off = StepPolicy(SolverSettings(changing_precision="double"), 1.0)
     off.step(-1, mode)
     assert not off.single
+
+
+def test_mixed_steps():
+    """The steps PETSc solves take mixed pairs while they must cut their residual by at most
+    mixed_reduction_max: a changing step by 1 / rtol, an exact one by the latest measure over the
+    tolerance; never float32-basis steps, never without a tolerance, never with the setting 0."""
+    tol, top = 1e-8, S.mixed_reduction_max
+    p = StepPolicy(S, 1.0, tol=tol)
+    p.record_residual(1.0)
+    p.step(-1, "contact")
+    assert p.single and not p.mixed                               # float32 basis: not a PETSc step
+    p.record_residual(top * tol * 1.01)
+    p.step(0, "contact")
+    assert not p.mixed                                            # an exact step from too far out
+    p.record_residual(top * tol * 0.99)
+    p.step(0, "contact")
+    assert p.mixed
+    assert p.mixed_reduction(1e-3) == pytest.approx(1e3, **ROUND) and p.mixed_reduction(None) == 0.99 * top
+    # tightened free-set steps (rtol < single_rtol_min: PETSc in float64 basis) by their rtol
+    q = StepPolicy(SolverSettings(lin_rtol=1e-3), 1.0, tol=tol)
+    q.record_residual(1.0)
+    q.step(5, "free")
+    assert not q.single and q.mixed
+    q = StepPolicy(SolverSettings(lin_rtol=0.1 / top), 1.0, tol=tol)
+    q.record_residual(1.0)
+    q.step(5, "free")
+    assert not q.single and not q.mixed                           # 10 x top
+    for off in (StepPolicy(S, 1.0), StepPolicy(SolverSettings(mixed_reduction_max=0.0), 1.0, tol=tol)):
+        off.record_residual(tol)
+        off.step(0, "free")
+        assert not off.mixed

@@ -201,7 +201,8 @@ def test_single_gmres_subtract_in_blocks(monkeypatch):
 
 
 # double precision throughout: the reference of the float32 variants
-_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0"}
+_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0",
+           "vc_mixed_reduction_max": "0"}
 
 
 def _solve(N, v, sigma0, options):
@@ -222,7 +223,8 @@ def test_single_steps_same_solution(sigma0, mode, range_max, mixed):
     (the operator's backward and the free-set preconditioner's forward transform in float32) or not."""
     one, act1, pairs1 = _solve(256, 10.0, sigma0, {"vc_changing_precision": "single",
                                                    "vc_single_range_max": str(range_max),
-                                                   "vc_pc_range_max": str(range_max), "vc_mixed_pairs": mixed})
+                                                   "vc_pc_range_max": str(range_max), "vc_mixed_pairs": mixed,
+                                                   "vc_mixed_reduction_max": "0"})
     two, act2, pairs2 = _solve(256, 10.0, sigma0, _DOUBLE)
     assert one.converged and two.converged and max(one.residual, two.residual) <= 1e-8
     assert one.diagnostics["step_modes"][-1][1] == mode
@@ -241,6 +243,20 @@ def test_single_steps_same_solution(sigma0, mode, range_max, mixed):
     assert abs(one.mu / two.mu - 1) <= 1e-6, (one.mu, two.mu)
     # float32 changes only the rounding of the loose steps: the same number of Newton steps, give or take one
     assert abs(one.iterations - two.iterations) <= 1
+
+
+@pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.0e5, "contact")])
+def test_petsc_steps_mixed_same_solution(sigma0, mode):
+    """The steps PETSc solves (here the exact ones) with mixed pairs in their operator
+    (mixed_reduction_max, default) against float64 pairs (0): the same solution and Newton steps; every
+    mixed pair is an iteration of such a step (one operator product each)."""
+    one, act1, _ = _solve(256, 10.0, sigma0, {})
+    two, act2, _ = _solve(256, 10.0, sigma0, {"vc_mixed_reduction_max": "0"})
+    d1, d2 = one.diagnostics, two.diagnostics
+    assert d1["step_modes"][-1][1] == mode
+    petsc_its = one.linear_iterations - d1["single_iterations"]
+    assert 0 < d1["mixed_pairs"] <= petsc_its and d2["mixed_pairs"] == 0
+    _same_path(one, act1, two, act2)
 
 
 def _same_path(one, act1, two, act2):

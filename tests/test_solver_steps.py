@@ -15,7 +15,7 @@ from vecontact.solver.freeset import FreeSetStep
 from vecontact.solver.operator import ContactOperator
 from vecontact.solver.settings import SolverSettings
 from vecontact.solver.snes import petsc
-from vecontact.solver.subset import Workspace
+from vecontact.solver.subset import Mixed, Workspace
 
 N, L = 32, 1e-4
 
@@ -170,3 +170,54 @@ def test_step_iterates_even_when_its_atol_is_met_at_once(kind):
         assert np.linalg.norm(jx - r) < 0.99 * np.linalg.norm(r)
     finally:
         step.release()
+
+
+@pytest.mark.parametrize("kind", [ContactSetStep, FreeSetStep])
+def test_mixed_step_meets_its_tolerance(kind):
+    """set_tolerances(mixed=True): the PETSc solve's operator takes its backward transform in float32
+    (one mixed pair an iteration, counted).  To rtol 1e-6 the step solves the Newton system as well as
+    with float64 pairs (measured 1.3e-6 and 2.0e-6 of max|r| both ways); to rtol 1e-10 it stalls near
+    the float32 rounding of A z (4.5e-7) where float64 pairs reach 2e-10: the limit
+    StepPolicy.mixed_reduction keeps the mixed steps away from (mixed_reduction_max)."""
+    op = _operator()
+    act = op.hhat > np.quantile(op.hhat, 0.7)
+    r = np.random.default_rng(7).standard_normal((N, N))
+    err = {}
+    for rtol in (1e-6, 1e-10):
+        for mixed in (True, False):
+            step = kind(op, op.kappa, petsc(), "steptest_", SolverSettings())
+            try:
+                step.set_tolerances(rtol, 0.0, 200, mixed=mixed)
+                x = _apply_step(step, act, r)
+                err[rtol, mixed] = np.max(np.abs(_jacobian(op, act, x) - r)) / np.max(np.abs(r))
+                assert step.mixed_pairs == (step.iterations if mixed else 0) and step.iterations > 5
+            finally:
+                step.release()
+    assert err[1e-6, True] <= min(1e-5, 1.5 * err[1e-6, False]), err
+    assert err[1e-10, False] <= 1e-8 < err[1e-10, True], err
+
+
+def test_products_fold_the_normalisation_into_their_input():
+    """Grid.product_of (and Mixed's) takes the backward transform's 1/N^2 on the |S| entries of x
+    when unscaled: bit for bit SlabFFT.apply of the scattered x (1/N^2 a power of two), and
+    SlabFFT.apply's own scale pass otherwise (to rounding of a scaled multiplier)."""
+    op = _operator()
+    fft = op.fft
+    work = Workspace(fft)
+    idx = np.flatnonzero((op.hhat > np.quantile(op.hhat, 0.6)).ravel())
+    x = np.random.default_rng(11).standard_normal(idx.size)
+    full = np.zeros(N * N)
+    full[idx] = x
+    full = full.reshape(N, N)
+    g, g32 = work.grid, work.float32_grid()
+    g.product_of(idx, x, op.c, 1.0)
+    assert np.array_equal(g.out, fft.apply(full, op.c))
+    g.product_of(idx, x, op.m, 0.37)
+    assert np.max(np.abs(g.out - fft.apply(full, op.m * 0.37))) <= 1e-14 * np.max(np.abs(g.out))
+
+    class Step:
+        mixed_pairs = 0
+    mixed = Mixed(g, g32, Step)
+    mixed.product_of(idx, x, op.c, 1.0)
+    assert np.array_equal(g32.out, fft.apply_across(fft.single(), full, op.c, fft.single().real_array()))
+    assert Step.mixed_pairs == 1

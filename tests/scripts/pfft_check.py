@@ -174,6 +174,24 @@ def check_scale_and_release(comm, N):
     assert np.array_equal(fft.apply(x, mult, scale=1.0), fft.apply(x, mult))
     x32 = x.astype(np.float32)
     assert rel(one.apply(x32, mult.astype(np.complex64), scale=0.37), ref) < 2e-6
+    # normalised: the input carries the 1/N^2 (subset.Grid): a power of two for N = 2^k, so the same bits
+    plain = fft.apply(x, mult)
+    xn = x * fft.norm
+    pow2 = N & (N - 1) == 0
+    for f, inp in ((fft, xn), (one, xn.astype(np.float32))):
+        got = f.apply(inp, mult.astype(f.complex_dtype), normalised=True)
+        want = f.apply(inp / f.norm, mult.astype(f.complex_dtype))
+        assert np.array_equal(got, want) if pow2 else rel(got, want) < (1e-14 if f is fft else 2e-6)
+    across = one.real_array()
+    fft.apply_across(one, xn, mult, across, normalised=True)
+    assert np.array_equal(across, fft.apply_across(one, x, mult, one.real_array())) if pow2 else \
+        rel(across, plain) < 2e-6
+    try:
+        fft.apply(xn, mult, scale=0.37, normalised=True)
+    except ValueError:
+        pass
+    else:
+        raise AssertionError("apply took a scale with normalised input")
     gone = []
     for f, inp in ((fft, x), (one, x32)):
         out = f.apply(inp, mult.astype(f.complex_dtype))

@@ -185,6 +185,7 @@ class SlabFFT:
         self.kx = kx.reshape(N, 1)
         self.ky = np.arange(self.col_start, self.col_stop, dtype=np.int64).reshape(1, self.ncols)
         self._scale = 1.0 / (float(N) * float(N))
+        self.norm = self._scale       # 1 / N^2, the backward transform's normalisation (``apply``'s normalised)
 
         self.n_forward = 0
         self.n_backward = 0
@@ -411,23 +412,25 @@ class SlabFFT:
         self.n_backward += 1
         return real_out
 
-    def apply(self, real_in, multiplier, real_out=None, scale=1.0):
+    def apply(self, real_in, multiplier, real_out=None, scale=1.0, normalised=False):
         """``scale * backward(multiplier * forward(real_in))`` with no temporaries; counts one pair.
 
         ``multiplier`` is complex or real, broadcastable to ``local_fourier_shape`` (e.g. a full local
         array, or shape (N, 1) for a function of kx only).  ``real_out`` may be ``real_in``.
         ``scale`` (a number) rides on the 1/N^2 pass: a multiple of a stored multiplier without a
-        whole-grid copy of it.  Use ``hermitian_fix`` on multipliers that are not Hermitian on the
-        x-Nyquist row.
+        whole-grid copy of it.  ``normalised``: ``real_in`` already carries the 1/N^2 (``norm``; the
+        caller folded it in where it writes its input, subset.Grid): no pass over the output at all,
+        and ``scale`` must be 1.
+        Use ``hermitian_fix`` on multipliers that are not Hermitian on the x-Nyquist row.
         """
         self._check_real(real_in)
         if real_out is None:
             real_out = self.real_array()
         else:
             self._check_real(real_out, "real_out")
-        return self._pair(self, real_in, multiplier, real_out, scale)
+        return self._pair(self, real_in, multiplier, real_out, scale, normalised)
 
-    def apply_across(self, twin, real_in, multiplier, real_out, scale=1.0):
+    def apply_across(self, twin, real_in, multiplier, real_out, scale=1.0, normalised=False):
         """``apply`` with the forward transform in this SlabFFT's precision and the backward in ``twin``'s
         (its other-precision twin: same grid and split).  ``real_in`` and
         ``real_out`` must be the two precisions' local real arrays, ``multiplier`` is applied in the wider
@@ -439,15 +442,17 @@ class SlabFFT:
             raise ValueError("apply_across: real_in / real_out must be this SlabFFT's and its twin's arrays")
         self._check_real(real_in)
         self._check_real(real_out, "real_out")
-        return self._pair(twin, real_in, multiplier, real_out, scale)
+        return self._pair(twin, real_in, multiplier, real_out, scale, normalised)
 
-    def _pair(self, twin, real_in, multiplier, real_out, scale):
+    def _pair(self, twin, real_in, multiplier, real_out, scale, normalised):
         """The pair of ``apply`` (``twin`` is self) and ``apply_across``: forward here, multiply into the
         twin's B, backward there; timed, and counted on the double-precision one of the two."""
+        if normalised and scale != 1.0:
+            raise ValueError("apply: normalised input takes no scale (fold it into the input)")
         t0 = time.perf_counter()
         self._forward_into(real_in, self._B)
         np.multiply(self._B, multiplier, out=twin._B, casting="same_kind")
-        twin._backward_from_B(real_out, scaled=False, scale=scale)
+        twin._backward_from_B(real_out, scaled=normalised, scale=scale)
         _APPLY_SECONDS[0] += time.perf_counter() - t0
         (twin if twin.precision == "double" else self).n_apply += 1
         return real_out

@@ -25,6 +25,11 @@ is at least the floor of its mode: single_rtol_min on the free set (tighter, a f
 next iterate less accurate), single_rtol_min_contact (0) on the contact set, whose flexible solve forms
 the solution from the preconditioned vectors, not from the float32 basis [RESULTS.md].
 
+A step PETSc solves (exact, or tightened below that floor) forms its operator's products with a float32
+backward transform (``mixed``, subset.Mixed) while it must cut its residual by at most
+mixed_reduction_max (``mixed_reduction``): such a solve stalls near 1e-7 of its start (the float32
+rounding of A z), and the Newton residual that judges it is formed in float64.
+
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
 iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
 """
@@ -64,8 +69,9 @@ class StepPolicy:
     ``changes`` and ``residuals`` keep the history the rules read (and the solver reports).
     """
 
-    def __init__(self, settings, atol, own=True):
+    def __init__(self, settings, atol, own=True, tol=None):
         self.settings = settings
+        self.tol = tol             # the solve's convergence tolerance (mixed: None, never)
         self.own = own
         self.lin_rtol = settings.lin_rtol
         self.atol = atol
@@ -73,6 +79,7 @@ class StepPolicy:
         self.changes = []
         self.residuals = []
         self.single = False        # the latest step solves in single precision (single.py)
+        self.mixed = False         # ... else in PETSc, its operator with mixed pairs (mixed_reduction)
         self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (record_iterations)
         self._last = None          # (mode, change, cap) of the latest step
 
@@ -115,10 +122,23 @@ class StepPolicy:
         if change == 0:
             cap = s.cycle_max_it if self.cycling and mode == "free" else s.ksp_max_it
             self._last = (mode, change, cap)
+            self.mixed = self.mixed_reduction(None) <= s.mixed_reduction_max
             return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
         cap = min(s.ksp_max_it, self.maxit_changing)
         floor = s.single_rtol_min_contact if mode == "contact" else s.single_rtol_min
         self.single = s.changing_precision == "single" and rtol >= floor
+        self.mixed = not self.single and self.mixed_reduction(rtol) <= s.mixed_reduction_max
         self._last = (mode, change, cap)
         return rtol, atol, cap
+
+    def mixed_reduction(self, rtol):
+        """The factor by which the next step must cut its residual: 1 / ``rtol`` for a changing step,
+        for an exact one (rtol None) the latest measure over the tolerance (inf when unknown).  A
+        solve whose operator takes mixed pairs stalls near 1e-7 of its start (float32 rounding of A z),
+        so it takes them only up to mixed_reduction_max [RESULTS.md]."""
+        if rtol is not None:
+            return 1.0 / rtol
+        if self.tol is None or not self.residuals:
+            return float("inf")
+        return self.residuals[-1] / self.tol

@@ -89,6 +89,9 @@ class SolverSettings:
     mixed_pairs: str = _knob("on", "on: where their pairs are float64, a float32-basis step's products take "
                              "the backward (A) or forward (B) transform in float32 (subset.Mixed) [RESULTS.md]",
                              choices=("on", "off"))
+    mixed_reduction_max: float = _knob(1e5, "the steps PETSc solves (exact, tightened) form their operator with a "
+                                       "float32 backward transform (subset.Mixed) while they must cut their "
+                                       "residual by at most this (0: never) [RESULTS.md]", lo=0)
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
                                  "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
                                  choices=("single", "double"))

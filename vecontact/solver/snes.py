@@ -123,7 +123,7 @@ class _Semismooth:
         if self.policy.cycling and mode == "free":
             step.start_cycles()
         if tolerances is not None:
-            step.set_tolerances(*tolerances, single=self.policy.single)
+            step.set_tolerances(*tolerances, single=self.policy.single, mixed=self.policy.mixed)
         if self.stop is not None and change == 0:
             self.stop.arm(self.policy.residuals[-1])
         elif self.stop is not None:
@@ -240,7 +240,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         form = ViNewton(state, PETSc)
     else:
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
-        policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF))
+        policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF),
+                            tol=tol)
         work = Workspace(fft)            # both step types' whole-grid arrays, held once
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))

@@ -38,14 +38,28 @@ class Grid:
         self._gathered = np.empty(0, dtype=self.buf.dtype)
         self._casts = {}
 
-    def scatter(self, idx, x):
+    def scatter(self, idx, x, norm=None):
         """``buf`` = x on the flat local points ``idx`` and zero elsewhere: the previous scatter's
-        points are cleared when ``idx`` is another array (a new S, or the other step type's)."""
+        points are cleared when ``idx`` is another array (a new S, or the other step type's).  With
+        ``norm``, x times that number (through the ``gathered`` scratch)."""
         flat = self.buf.reshape(-1)
         if self.support is not idx:
             flat[self.support] = 0.0
             self.support = idx
+        if norm is not None:
+            x = np.multiply(x, norm, out=self.gathered(idx.size), casting="same_kind")
         flat[idx] = x       # not .flat[idx] nor np.put: slower (RESULTS.md)
+
+    def product_of(self, idx, x, multiplier, scale):
+        """``out`` = scale x (multiplier applied to x on the points ``idx``, zero elsewhere).  Unscaled
+        products take the backward transform's 1/N^2 on the |S| entries of x instead of in a pass over
+        the N^2 of ``out`` (SlabFFT.apply's normalised); a power of two for even N, so the same bits."""
+        if scale == 1.0:
+            self.scatter(idx, x, self.fft.norm)
+            self.fft.apply(self.buf, multiplier, self.out, normalised=True)
+        else:
+            self.scatter(idx, x)
+            self.fft.apply(self.buf, multiplier, self.out, scale)
 
     def cast(self, multiplier):
         """``multiplier`` in the grid's precision (the same array if it already is; made once)."""
@@ -57,10 +71,6 @@ class Grid:
         if hit is None or hit[0] is not multiplier:      # the source is kept, so its id stays its own
             hit = self._casts[id(multiplier)] = (multiplier, m.astype(dtype))
         return hit[1]
-
-    def product(self, multiplier, scale):
-        """``out`` = scale x (multiplier ``buf``) (SlabFFT.apply)."""
-        self.fft.apply(self.buf, multiplier, self.out, scale)
 
     def gathered(self, n):
         """A scratch array of n entries, of the grid's dtype."""
@@ -87,17 +97,16 @@ class Mixed:
     def out(self):
         return self.dst.out
 
-    def scatter(self, idx, x):
-        self.src.scatter(idx, x)
-
     def cast(self, multiplier):
         return multiplier
 
     def gathered(self, n):
         return self.dst.gathered(n)
 
-    def product(self, multiplier, scale):
-        self.src.fft.apply_across(self.dst.fft, self.src.buf, multiplier, self.dst.out, scale)
+    def product_of(self, idx, x, multiplier, scale):
+        unscaled = scale == 1.0
+        self.src.scatter(idx, x, self.src.fft.norm if unscaled else None)
+        self.src.fft.apply_across(self.dst.fft, self.src.buf, multiplier, self.dst.out, scale, normalised=unscaled)
         self.step.mixed_pairs += 1
 
 
@@ -125,8 +134,7 @@ class Restricted:
         grid's goes through ``grid.gathered``)."""
         g = self.grid
         idx = self.step.idx
-        g.scatter(idx, x)
-        g.product(self.multiplier, self.scale)
+        g.product_of(idx, x, self.multiplier, self.scale)
         if y.dtype == g.out.dtype:
             gather(g.out, idx, y)
         else:                           # take's own casting copies (and casts) y's old contents first
@@ -276,7 +284,9 @@ class SubsetStep:
         self.mixed_pairs = 0            # pairs with one transform in float32 (Mixed)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
-        self._A = self._b = self._y = None
+        self._A = self._b = self._y = self._A_ctx = None
+        self.mixed = False              # the next PETSc solve's operator with mixed pairs (set_tolerances)
+        self._mixed_grid = None         # its Mixed (_krylov_grid)
         self.ksp = PETSc.KSP().create(comm=self.comm)
         self._prefix = inner_prefix
         self.ksp.setOptionsPrefix(inner_prefix)
@@ -289,12 +299,14 @@ class SubsetStep:
         ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
 
-    def set_tolerances(self, rtol, atol, max_it, single=False):
+    def set_tolerances(self, rtol, atol, max_it, single=False, mixed=False):
         """``max_it`` counts Krylov iterations; nested (``cycle`` > 1), whole cycles of the outer KSP.
-        ``single``: solve in single precision (single.py) with these tolerances instead of the KSP."""
+        ``single``: solve in single precision (single.py) with these tolerances instead of the KSP;
+        ``mixed``: else the KSP's operator with mixed pairs (_krylov_grid)."""
         self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=-(-max_it // self.cycle))
         # not when the user chose the Krylov method (-ksp_type / -contact_ksp_type): theirs runs
         self.single = bool(single) and self.own_krylov()
+        self.mixed = bool(mixed) and not self.single
         self._tolerances = (rtol, atol, max_it)
         if not self.single and self._single is not None:
             self._single.free()           # the KSP's own basis takes the memory budget now
@@ -316,8 +328,9 @@ class SubsetStep:
                 self.ksp.reset()          # a KSP cannot change its operator's size otherwise
                 for obj in (self._A, self._b, self._y):
                     obj.destroy()
+            self._A_ctx = self.operator()
             self._A = PETSc.Mat().createPython(((n_loc, self.n_S), (n_loc, self.n_S)),
-                                               context=self.operator(), comm=self.comm)
+                                               context=self._A_ctx, comm=self.comm)
             self._A.setUp()
             self._b = self._A.createVecLeft()
             self._y = self._A.createVecRight()
@@ -355,10 +368,23 @@ class SubsetStep:
         if self.single:
             self._solve_single()
         else:
+            self._A_ctx.grid = self._krylov_grid()
             self._y.set(0.0)
             self.ksp.solve(self._b, self._y)
             self.iterations += self.cycle * self.ksp.getIterationNumber()
         self.solves += 1
+
+    def _krylov_grid(self):
+        """Where the PETSc solve's operator forms its products: with ``mixed`` (set_tolerances) and
+        vecontact's own Krylov method, a float64 forward and a float32 backward transform (Mixed).  A z
+        only enters the Krylov basis and the Newton residual is formed in float64 (snes.py), so its
+        float32 rounding limits how far one solve can cut its residual (about 1e-7), not the answer
+        (StepPolicy, mixed_reduction_max)."""
+        if self.mixed and self.own_krylov():
+            if self._mixed_grid is None:
+                self._mixed_grid = Mixed(self.grid, self.work.float32_grid(), self)
+            return self._mixed_grid
+        return self.grid
 
     def own_krylov(self):
         """Whether the inner KSP's type is vecontact's default, not one the user chose (-ksp_type /
@@ -433,7 +459,7 @@ class SubsetStep:
         for obj in (self._A, self._b, self._y, self.ksp):
             if obj is not None:
                 obj.destroy()
-        self._A = self._b = self._y = self.ksp = None
+        self._A = self._b = self._y = self.ksp = self._A_ctx = self._mixed_grid = None
         opts = self.PETSc.Options()
         for k in self._own_keys:
             try:
