@@ -53,7 +53,7 @@ class Grid:
     def product_of(self, idx, x, multiplier, scale):
         """``out`` = scale x (multiplier applied to x on the points ``idx``, zero elsewhere).  Unscaled
         products take the backward transform's 1/N^2 on the |S| entries of x instead of in a pass over
-        the N^2 of ``out`` (SlabFFT.apply's normalised); a power of two for even N, so the same bits."""
+        the N^2 of ``out`` (SlabFFT.apply's normalised): for N a power of two 1/N^2 is one, so the same bits."""
         if scale == 1.0:
             self.scatter(idx, x, self.fft.norm)
             self.fft.apply(self.buf, multiplier, self.out, normalised=True)
