@@ -50,16 +50,17 @@ class Grid:
             x = np.multiply(x, norm, out=self.gathered(idx.size), casting="same_kind")
         flat[idx] = x       # not .flat[idx] nor np.put: slower (RESULTS.md)
 
+    def load(self, idx, x, scale):
+        """Scatter x as the input of a product with ``scale``; True when it carries the 1/N^2 (scale 1:
+        taken on the |S| entries of x instead of in a pass over the N^2 of the output, SlabFFT.apply's
+        normalised; for N a power of two 1/N^2 is one, so the same bits)."""
+        unscaled = scale == 1.0
+        self.scatter(idx, x, self.fft.norm if unscaled else None)
+        return unscaled
+
     def product_of(self, idx, x, multiplier, scale):
-        """``out`` = scale x (multiplier applied to x on the points ``idx``, zero elsewhere).  Unscaled
-        products take the backward transform's 1/N^2 on the |S| entries of x instead of in a pass over
-        the N^2 of ``out`` (SlabFFT.apply's normalised): for N a power of two 1/N^2 is one, so the same bits."""
-        if scale == 1.0:
-            self.scatter(idx, x, self.fft.norm)
-            self.fft.apply(self.buf, multiplier, self.out, normalised=True)
-        else:
-            self.scatter(idx, x)
-            self.fft.apply(self.buf, multiplier, self.out, scale)
+        """``out`` = scale x (multiplier applied to x on the points ``idx``, zero elsewhere)."""
+        self.fft.apply(self.buf, multiplier, self.out, scale, normalised=self.load(idx, x, scale))
 
     def cast(self, multiplier):
         """``multiplier`` in the grid's precision (the same array if it already is; made once)."""
@@ -104,9 +105,8 @@ class Mixed:
         return self.dst.gathered(n)
 
     def product_of(self, idx, x, multiplier, scale):
-        unscaled = scale == 1.0
-        self.src.scatter(idx, x, self.src.fft.norm if unscaled else None)
-        self.src.fft.apply_across(self.dst.fft, self.src.buf, multiplier, self.dst.out, scale, normalised=unscaled)
+        normalised = self.src.load(idx, x, scale)
+        self.src.fft.apply_across(self.dst.fft, self.src.buf, multiplier, self.dst.out, scale, normalised=normalised)
         self.step.mixed_pairs += 1
 
 
@@ -169,10 +169,9 @@ class _Single:
         if not float32_pairs and step.settings.mixed_pairs == "on":
             # float64 pairs only where a float32 rounding would be amplified: A's input (z, a gap on
             # the free set) and B's output (its z); A's output goes into the float32 basis anyway
-            single = step.work.float32_grid()
-            grid = Mixed(step.grid, single, step)
+            grid = step.operator_mixed()
             if self._B_grid is step.grid:
-                self._B_grid = Mixed(single, step.grid, step)
+                self._B_grid = Mixed(grid.dst, step.grid, step)
         self.A = step.operator().on(grid)
         self._stores = {}
 
@@ -286,7 +285,7 @@ class SubsetStep:
         self.solves = 0
         self._A = self._b = self._y = self._A_ctx = None
         self.mixed = False              # the next PETSc solve's operator with mixed pairs (set_tolerances)
-        self._mixed_grid = None         # its Mixed (_krylov_grid)
+        self._mixed_grid = None         # the operator's Mixed (operator_mixed)
         self.ksp = PETSc.KSP().create(comm=self.comm)
         self._prefix = inner_prefix
         self.ksp.setOptionsPrefix(inner_prefix)
@@ -380,11 +379,15 @@ class SubsetStep:
         only enters the Krylov basis and the Newton residual is formed in float64 (snes.py), so its
         float32 rounding limits how far one solve can cut its residual (about 1e-7), not the answer
         (StepPolicy, mixed_reduction_max)."""
-        if self.mixed and self.own_krylov():
-            if self._mixed_grid is None:
-                self._mixed_grid = Mixed(self.grid, self.work.float32_grid(), self)
-            return self._mixed_grid
-        return self.grid
+        return self.operator_mixed() if self.mixed and self.own_krylov() else self.grid
+
+    def operator_mixed(self):
+        """The operator's Mixed (float64 forward, float32 backward), one for the PETSc solves and the
+        float32-basis ones; on ``work.float32_grid()``, so it does not mark the step as running float32
+        pairs."""
+        if self._mixed_grid is None:
+            self._mixed_grid = Mixed(self.grid, self.work.float32_grid(), self)
+        return self._mixed_grid
 
     def own_krylov(self):
         """Whether the inner KSP's type is vecontact's default, not one the user chose (-ksp_type /
