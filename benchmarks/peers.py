@@ -43,7 +43,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from statistics import median
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
     os.environ[_v] = "1"
@@ -191,18 +190,8 @@ class Vecontact:
         self.hrms = float(np.sqrt(np.mean(self.h ** 2)))
 
     def raw_pair(self, repeats):
-        a = self.fft.real_array()
-        a[...] = self.h
-        m = self.fft.fourier_array()
-        m[...] = 1.0
-        self.fft.apply(a, m, a)
-        ts = []
-        for _ in range(repeats):
-            t = time.perf_counter()
-            self.fft.apply(a, m, a)
-            ts.append(time.perf_counter() - t)
-        del a, m
-        return dict(median=median(ts), min=min(ts))
+        fastest, middle = self.fft.time_pair(repeats)
+        return dict(median=middle, min=fastest)
 
     def solve(self, sigma0, tol):
         r = self.solve_contact(self.fft, self.L, self.h, self.el, 0.0, sigma0, tolerance=tol,

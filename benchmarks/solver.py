@@ -87,22 +87,9 @@ def worker(args):
     h = generate(fft, L, spec, args.seed)
     t_setup = time.perf_counter() - t0
 
-    # raw distributed FFT pair
-    a = fft.real_array()
-    a[...] = h
-    mult = fft.fourier_array()
-    mult[...] = 1.0
-    fft.apply(a, mult, a)
-    reps = []
-    for _ in range(args.fft_repeats):
-        comm.Barrier()
-        t = time.perf_counter()
-        fft.apply(a, mult, a)
-        comm.Barrier()
-        reps.append(time.perf_counter() - t)
-    # the minimum: the pair's cost without the machine's noise (medians of 7 swung 32-62 ms at 2048^2)
-    t_pair, t_pair_median = comm.bcast((min(reps), median(reps)), root=0)
-    del a, mult
+    # raw distributed FFT pair; the minimum: its cost without the machine's noise (medians of 7 swung
+    # 32-62 ms at 2048^2)
+    t_pair, t_pair_median = fft.time_pair(args.fft_repeats)
 
     # coarse copy of the surface (N/4 holds all the roughness) for the pressure calibration
     nc = max(N // 4, 64)

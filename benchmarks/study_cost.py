@@ -25,6 +25,14 @@ ratio over all runs' same-path cases together.  The reference's runs count as on
 ``--machine-commit PREFIX`` keeps only this file's rows solved by a commit starting with PREFIX in
 ``machine``: a later code version can take the same path at another speed.  It says the runs shared
 one machine, so ``core_hours_same_machine`` then divides every run by that one ratio.
+
+The pace probe (files written since session 43): the farm times a float64 FFT pair on each case's
+grid and ranks right after its solve (``raw_pair_seconds`` in /diagnostics, farm/case.py).  ``paced``
+per N (null unless every converged case has one) gives ``time_per_pair`` (seconds over pairs x raw
+pair: #15's measure, from the study itself), ``raw_pair_units`` (core-seconds over each case's raw
+pair: a cost the machine's pace is divided out of) and the median ``raw_pair``; against a reference
+that has probes too, ``ratios[N]["paced"]`` is the ratio of the two raw_pair_units over the cases
+probed in both (``probed``), with no need for cases that took the same path.
 """
 import argparse
 import json
@@ -32,6 +40,7 @@ import os
 import sys
 
 import numpy as np
+from numpy.lib import recfunctions
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -42,8 +51,17 @@ KEY = ("q1", "seed", "velocity", "pressure")
 
 def load(path):
     """(/cases structured array, {run index: git commit}, {N: cases the job plans}, {run index: start
-    time}) of a results file (read by :func:`vecontact.status.read_status`)."""
+    time}) of a results file (read by :func:`vecontact.status.read_status`).  The cases get one more
+    column, ``raw_pair_seconds``: the farm's pace probe of each case from /diagnostics (NaN where the
+    file has none: files before session 43, or diagnostics not aligned with /cases)."""
     st = read_status(path)
+    diag = st["diagnostics"]
+    pace = np.full(len(st["cases"]), np.nan)
+    if len(diag) == len(st["cases"]):
+        for i, d in enumerate(diag):
+            probe = json.loads(d).get("raw_pair_seconds") if d else None
+            pace[i] = np.nan if probe is None else float(probe)
+    cases = recfunctions.append_fields(st["cases"], "raw_pair_seconds", pace, usemask=False)
     runs = {int(r["run"]): str(r.get("git_commit") or "?")[:10] for r in st["runs"]}
     started = {int(r["run"]): str(r.get("started") or "?") for r in st["runs"]}
     q1s = [q1 for q1, *_ in st["expected"]]
@@ -51,7 +69,7 @@ def load(path):
     planned = {}
     for q1 in q1s:
         planned[grids[q1]] = planned.get(grids[q1], 0) + 1
-    return st["cases"], runs, planned, started
+    return cases, runs, planned, started
 
 
 def cost(cases, runs):
@@ -71,6 +89,23 @@ def cost(cases, runs):
     return rows, per_n, count
 
 
+def paced(cases):
+    """Per N, over its converged cases, when every one of them has a pace probe: ``time_per_pair`` =
+    sum of seconds / sum of (FFT pairs x raw pair seconds), and ``raw_pair_units`` = sum of ranks x
+    seconds / raw pair seconds (the core-seconds counted in raw pairs of each case's own moment: the
+    cost with the machine's pace divided out), ``raw_pair`` the median probe (s).  {N: dict or None}."""
+    out = {}
+    for N in np.unique(cases["N"]):
+        c = cases[(cases["N"] == N) & (cases["converged"] == 1)]
+        if not len(c) or np.isnan(c["raw_pair_seconds"]).any():
+            out[int(N)] = None
+            continue
+        out[int(N)] = dict(time_per_pair=float(c["seconds"].sum() / (c["fft_pairs"] * c["raw_pair_seconds"]).sum()),
+                           raw_pair_units=float((c["seconds"] * c["ranks"] / c["raw_pair_seconds"]).sum()),
+                           raw_pair=float(np.median(c["raw_pair_seconds"])))
+    return out
+
+
 SAME_PATH_RTOL = 1e-9   # FFT pairs equal to this: the case took the same path through the solver
 
 
@@ -78,8 +113,9 @@ def compare(cases, ref, machine=None):
     """Cases converged in both: (count, max |dA/A0| N^2 in points, max relative d mu, sums, by_run)
     with sums[(N, velocity)] = array [cases, pairs here, pairs in ref, core-seconds here, core-seconds
     in ref, the same two core-seconds over the cases whose FFT pairs are equal in both files and, if
-    given, whose entry of the bool array ``machine`` (aligned with ``cases``) is True], and by_run[(N,
-    run)] the same sums over this file's cases of each run (its ``/cases`` column ``run``)."""
+    given, whose entry of the bool array ``machine`` (aligned with ``cases``) is True, the core-seconds
+    over each case's raw pair here and in ref over the cases probed in both, and those cases], and
+    by_run[(N, run)] the same sums over this file's cases of each run (its ``/cases`` column ``run``)."""
     index = {tuple(float(r[k]) for k in KEY): r for r in ref[ref["converged"] == 1]}
     n, points, mu, sums, by_run = 0, 0.0, 0.0, {}, {}
     usable = np.ones(len(cases), dtype=bool) if machine is None else np.asarray(machine, dtype=bool)
@@ -92,8 +128,10 @@ def compare(cases, ref, machine=None):
         mu = max(mu, abs(float(r["mu"]) / float(o["mu"]) - 1.0))
         here, there = float(r["seconds"] * r["ranks"]), float(o["seconds"] * o["ranks"])
         same = use and abs(float(r["fft_pairs"]) - float(o["fft_pairs"])) <= SAME_PATH_RTOL * float(o["fft_pairs"])
-        row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same, same],
-                       dtype=float)
+        probed = not (np.isnan(r["raw_pair_seconds"]) or np.isnan(o["raw_pair_seconds"]))
+        units = (here / r["raw_pair_seconds"], there / o["raw_pair_seconds"]) if probed else (0.0, 0.0)
+        row = np.array([1, r["fft_pairs"], o["fft_pairs"], here, there, here * same, there * same, same,
+                        *units, probed], dtype=float)
         key = (int(r["N"]), float(r["velocity"]))
         sums[key] = sums.get(key, 0.0) + row
         key = (int(r["N"]), int(r["run"]))
@@ -103,10 +141,13 @@ def compare(cases, ref, machine=None):
 
 def _ratios(t):
     """``pairs``, ``core_hours`` (here / ref), ``machine`` (core-seconds here / ref over the same-path
-    cases: the two machines' speed ratio, null without such cases) of one array of compare's sums."""
+    cases: the two machines' speed ratio, null without such cases), ``paced`` (core-seconds in raw
+    pairs here / ref over the ``probed`` cases, those with a pace probe in both files: the code's cost
+    ratio with each case's machine pace divided out, null without such cases) of one array of
+    compare's sums."""
     machine = float(t[5] / t[6]) if t[6] > 0 else None
     return dict(cases=int(t[0]), same_path=int(t[7]), pairs=float(t[1] / t[2]), core_hours=float(t[3] / t[4]),
-                machine=machine)
+                machine=machine, probed=int(t[10]), paced=float(t[8] / t[9]) if t[10] > 0 else None)
 
 
 def ratios(sums, by_run, per_run=True):
@@ -144,7 +185,14 @@ def main(argv=None):
     print("planned cases per N: " + ", ".join(f"{N}: {n}" for N, n in sorted(planned.items())))
     complete = count.get(args.n, 0) == planned.get(args.n, -1)
     out = dict(core_hours=per_n, cases=count, planned=planned, n=args.n,
-               core_hours_n=per_n.get(args.n) if complete else None)
+               core_hours_n=per_n.get(args.n) if complete else None, paced=paced(cases))
+    for N, p in sorted(out["paced"].items()):
+        if p is None:
+            print(f"{N:5d}: no pace probe in every converged case (raw_pair_seconds: files before session 43)")
+        else:
+            print(f"{N:5d}: raw pair (median of the cases' probes) {p['raw_pair'] * 1e3:.1f} ms; time per pair "
+                  f"{p['time_per_pair']:.3f} x the raw pair; {p['raw_pair_units']:.0f} core-seconds in raw "
+                  f"pairs (core-hours at a raw pair of P seconds: {p['raw_pair_units'] / 3600:.1f} P)")
     if args.reference:
         ref = load(args.reference)[0]
         machine = None
@@ -173,6 +221,9 @@ def main(argv=None):
                 how = "the --machine-commit rows' ratio" if args.machine_commit else "each run by its own machine ratio"
                 print(f"{N:5d}: at the reference's speed ({how}) the core-hours ratio is "
                       f"{r['core_hours_same_machine']:.3f}")
+            if r["paced"] is not None:
+                print(f"{N:5d}: {r['probed']} cases probed in both: core-seconds in raw pairs, this file over "
+                      f"the reference's: {r['paced']:.3f} (the code's cost ratio, each case's machine pace divided out)")
         out.update(compared=n, max_points=points, max_mu_rel=mu, ratios=rat)
     print(json.dumps(out))
     return 0

@@ -316,6 +316,8 @@ def test_serial_run(reference):
         assert dg["levels"][-1]["N"] == row["N"] and dg["levels"][-1]["iterations"] == row["iterations"]
         assert dg["history"][-1][1] == pytest.approx(row["residual"], rel=1e-12)
         assert len(dg["active_set_changes"]) == row["iterations"]
+        # the farm's pace probe: a pair on the case's grid, timed after the solve (not in its seconds)
+        assert isinstance(dg["raw_pair_seconds"], float) and dg["raw_pair_seconds"] > 0.0
 
 
 def test_fft_planner_patient_reaches_the_grid_and_keeps_the_results(reference, tmp_path):

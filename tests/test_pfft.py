@@ -107,6 +107,24 @@ def test_apply_seconds_counts_apply_only():
     assert apply_seconds() == s1
 
 
+def test_time_pair_is_a_pair_that_counts_nowhere():
+    """time_pair: (fastest, median) of the timed pairs, the fastest no more than the median nor than the
+    wall time of all of them; neither the counters nor apply_seconds move; bad repeats refused."""
+    import time
+    fft = SlabFFT(MPI.COMM_SELF, 64, planner="estimate", wisdom_file=False)
+    x = fft.real_array()
+    fft.apply(x, 2.0, x)
+    fft.forward(x)
+    before, s0 = (fft.pairs, fft.transforms), apply_seconds()
+    t0 = time.perf_counter()
+    fastest, middle = fft.time_pair(5)
+    wall = time.perf_counter() - t0
+    assert 0.0 < fastest <= middle and 5 * fastest <= wall
+    assert (fft.pairs, fft.transforms) == before and apply_seconds() == s0
+    with pytest.raises(ValueError, match="repeats"):
+        fft.time_pair(0)
+
+
 def test_wisdom_file(tmp_path):
     path = tmp_path / "sub" / "wisdom.pkl"
     SlabFFT(MPI.COMM_SELF, 24, planner="measure", wisdom_file=str(path))

@@ -1,8 +1,11 @@
 """``vecontact plot`` and ``vecontact report`` on a tiny study made here: every figure and table is
 produced, from a complete and from a partial results file, and the numbers are those of the file."""
+import json
 import os
 import re
 import shutil
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -17,6 +20,14 @@ from vecontact.plot import MAPS_SKIPPED
 PAPER_FIGURES = ["fig1_spectrum.png", "fig2_friction.png", "fig3_contact_maps.png", "fig4_area.png",
                  "fig5_master.png"]
 BEYOND_FIGURES = ["theory_error.png", "morphology.png", "morphology_vs_v.png", "gamma_sensitivity.png"]
+STUDY_COST = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "study_cost.py")
+
+
+def study_cost(path, *extra):
+    """benchmarks/study_cost.py on ``path``: its last line's JSON (the run must succeed)."""
+    p = subprocess.run([sys.executable, STUDY_COST, str(path), *extra], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 @pytest.fixture(scope="module")
@@ -154,22 +165,11 @@ def test_inset_window_is_around_a_large_patch():
 def test_study_cost_benchmark(study_files, tmp_path):
     """benchmarks/study_cost.py: core-hours per N are the converged cases' seconds x ranks; a file
     against itself differs by nothing; the grid total is null until every planned case is in."""
-    import json
-    import subprocess
-    import sys
-    script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks",
-                          "study_cost.py")
     out = study_files / "out.h5"
-
-    def run(path, *extra):
-        p = subprocess.run([sys.executable, script, str(path), *extra], capture_output=True, text=True,
-                           timeout=120)
-        assert p.returncode == 0, p.stderr
-        return json.loads(p.stdout.strip().splitlines()[-1])
 
     with h5py.File(out, "r") as f:
         cases = f["cases"][()]
-    res = run(out, "--reference", str(out), "--n", "64")
+    res = study_cost(out, "--reference", str(out), "--n", "64")
     for N in (64, 128):
         ok = (cases["N"] == N) & (cases["converged"] == 1)
         assert res["cases"][str(N)] == ok.sum() == res["planned"][str(N)] == 2 * 2 * 3
@@ -190,7 +190,7 @@ def test_study_cost_benchmark(study_files, tmp_path):
         c["seconds"][c["N"] == 64] *= 2
         del f["cases"]
         f.create_dataset("cases", data=c[(c["N"] != 128) | (c["velocity"] != 1.0)])
-    res = run(out, "--reference", str(ref))
+    res = study_cost(out, "--reference", str(ref))
     assert res["compared"] == len(cases) - 2 * 3
     assert abs(res["ratios"]["64"]["pairs"] - 0.25) <= 1e-12 and abs(res["ratios"]["64"]["core_hours"] - 0.5) <= 1e-12
     assert abs(res["ratios"]["128"]["pairs"] - 1) <= 1e-12 and abs(res["ratios"]["128"]["core_hours"] - 1) <= 1e-12
@@ -201,9 +201,9 @@ def test_study_cost_benchmark(study_files, tmp_path):
     from vecontact.io.results import read_strings
     from vecontact.status import read_status
     commit = str(read_status(str(out))["runs"][0].get("git_commit") or "?")
-    res = run(out, "--reference", str(ref), "--machine-commit", commit[:7])
+    res = study_cost(out, "--reference", str(ref), "--machine-commit", commit[:7])
     assert abs(res["ratios"]["128"]["machine"] - 1) <= 1e-12
-    res = run(out, "--reference", str(ref), "--machine-commit", "no-such-commit")
+    res = study_cost(out, "--reference", str(ref), "--machine-commit", "no-such-commit")
     assert res["ratios"]["128"]["machine"] is None and abs(res["ratios"]["128"]["core_hours"] - 1) <= 1e-12
     # a file resumed in two runs on machines of different speed: run 1 (every other 64^2 case) took twice
     # the time on the same path; each run is measured against its own same-path cases
@@ -221,7 +221,7 @@ def test_study_cost_benchmark(study_files, tmp_path):
         del f["runs"]
         f.create_dataset("runs", data=np.array([json.dumps(r) for r in runs], dtype=object),
                          dtype=h5py.string_dtype())
-    res = run(two, "--reference", str(out))
+    res = study_cost(two, "--reference", str(out))
     r64 = res["ratios"]["64"]
     assert set(r64["runs"]) == {"0", "1"} and r64["runs"]["1"]["cases"] == later.size == r64["runs"]["1"]["same_path"]
     assert abs(r64["runs"]["0"]["machine"] - 1) <= 1e-12 and abs(r64["runs"]["1"]["machine"] - 2) <= 1e-12
@@ -229,7 +229,7 @@ def test_study_cost_benchmark(study_files, tmp_path):
     assert abs(r64["core_hours_same_machine"] - 1) <= 1e-12         # each run at the reference's speed
     assert list(res["ratios"]["128"]["runs"]) == ["0"]
     # --machine-commit: the user names the rows that measure one machine for all runs
-    r64 = run(two, "--reference", str(out), "--machine-commit", commit[:7])["ratios"]["64"]
+    r64 = study_cost(two, "--reference", str(out), "--machine-commit", commit[:7])["ratios"]["64"]
     assert r64["runs"]["1"]["machine"] is None and abs(r64["machine"] - 1) <= 1e-12
     assert abs(r64["core_hours_same_machine"] - r64["core_hours"]) <= 1e-12
     # a run none of whose cases took the reference's path: no speed for it, so no corrected total
@@ -238,7 +238,7 @@ def test_study_cost_benchmark(study_files, tmp_path):
         c["fft_pairs"][later] += 1
         del f["cases"]
         f.create_dataset("cases", data=c)
-    r64 = run(two, "--reference", str(out))["ratios"]["64"]
+    r64 = study_cost(two, "--reference", str(out))["ratios"]["64"]
     assert r64["runs"]["1"]["machine"] is None and r64["runs"]["1"]["same_path"] == 0
     assert r64["core_hours_same_machine"] is None and abs(r64["machine"] - 1) <= 1e-12
     partial = tmp_path / "partial.h5"
@@ -247,5 +247,50 @@ def test_study_cost_benchmark(study_files, tmp_path):
         keep = f["cases"][()][f["cases"]["N"] != 128]
         del f["cases"]
         f.create_dataset("cases", data=keep)
-    res = run(partial, "--n", "128")
+    res = study_cost(partial, "--n", "128")
     assert res["core_hours_n"] is None and "128" not in res["cases"]
+
+
+def test_study_cost_pace_probe(study_files, tmp_path):
+    """study_cost.py with the farm's pace probes: time per pair and core-seconds in raw pairs per N from
+    the file's own probes; a reference solved the same way on a machine twice as slow (seconds and
+    probes x2) costs twice the core-hours but the same paced cost; without every probe, no figure."""
+    out = study_files / "out.h5"
+
+    with h5py.File(out, "r") as f:
+        cases = f["cases"][()]
+        diag = [json.loads(d) for d in f["diagnostics"][()]]
+    probe = np.array([d["raw_pair_seconds"] for d in diag])
+    assert (probe > 0).all()
+    res = study_cost(out)
+    for N in (64, 128):
+        ok = (cases["N"] == N) & (cases["converged"] == 1)
+        got = res["paced"][str(N)]
+        want = cases["seconds"][ok].sum() / (cases["fft_pairs"][ok] * probe[ok]).sum()
+        assert abs(got["time_per_pair"] - want) <= 1e-12 * want
+        want = (cases["seconds"][ok] * cases["ranks"][ok] / probe[ok]).sum()
+        assert abs(got["raw_pair_units"] - want) <= 1e-12 * want
+    slow = tmp_path / "slow.h5"
+    shutil.copy(out, slow)
+    with h5py.File(slow, "r+") as f:
+        c = f["cases"][()]
+        c["seconds"] *= 2
+        del f["cases"]
+        f.create_dataset("cases", data=c)
+        text = [json.dumps(dict(d, raw_pair_seconds=2 * d["raw_pair_seconds"])) for d in diag]
+        del f["diagnostics"]
+        f.create_dataset("diagnostics", data=np.array(text, dtype=object), dtype=h5py.string_dtype())
+    for N, r in study_cost(out, "--reference", str(slow))["ratios"].items():
+        assert r["probed"] == r["cases"] and abs(r["core_hours"] - 0.5) <= 1e-12 and abs(r["paced"] - 1) <= 1e-12
+    # one case without its probe: no paced figures for its N, and that case leaves the paced ratio
+    with h5py.File(slow, "r+") as f:
+        text = [json.loads(d) for d in f["diagnostics"][()]]
+        first = int(np.flatnonzero(cases["N"] == 64)[0])
+        text[first]["raw_pair_seconds"] = None
+        del f["diagnostics"]
+        f.create_dataset("diagnostics", data=np.array([json.dumps(d) for d in text], dtype=object),
+                         dtype=h5py.string_dtype())
+    res = study_cost(slow, "--reference", str(out))
+    assert res["paced"]["64"] is None and res["paced"]["128"] is not None
+    r64 = res["ratios"]["64"]
+    assert r64["probed"] == r64["cases"] - 1 and abs(r64["paced"] - 1) <= 1e-12

@@ -88,6 +88,7 @@ def test_diagnostics_names_and_file(tmp_path):
     assert d["reason"] == "diverged_max_it" and d["fft_pairs_by_level"] == {"32": 40.0, "64": 100.0}
     assert d["levels"] == res.diagnostics["levels"] and d["kappa"] == 0.5 and d["ell"] == 1e-6
     assert "hrms" not in d                              # only the named keys
+    assert d["raw_pair_seconds"] is None and diagnostics(res, raw_pair_seconds=0.25)["raw_pair_seconds"] == 0.25
     # keys the solver did not fill: empty lists / None
     res.diagnostics = {}
     empty = diagnostics(res)

@@ -67,7 +67,9 @@ RESULT_DIAGNOSTICS = (REASON, "method", "measures", "fft_pairs_by_level")
 SOLVER_DIAGNOSTICS = (("levels", ()), ("history", ()), ("active_set_changes", ()), ("linear_history", ()),
                       ("step_modes", ()), ("measure_checks", ()), ("single_iterations", None),
                       ("float32_pairs", None), ("mixed_pairs", None), ("kappa", None), ("ell", None))
-DIAGNOSTICS = RESULT_DIAGNOSTICS + tuple(k for k, _ in SOLVER_DIAGNOSTICS)
+#: diagnostics the farm measures around the solve
+FARM_DIAGNOSTICS = ("raw_pair_seconds",)
+DIAGNOSTICS = RESULT_DIAGNOSTICS + tuple(k for k, _ in SOLVER_DIAGNOSTICS) + FARM_DIAGNOSTICS
 
 
 def empty_row():
@@ -115,12 +117,15 @@ def solved_row(theory, result, N, ranks, morphology=None):
     return row
 
 
-def diagnostics(result):
+def diagnostics(result, raw_pair_seconds=None):
     """The ``/diagnostics`` object of a solve (JSON-serialisable dict, keys DIAGNOSTICS in order):
     the reason, the method, the final measures, FFT pairs per grid size (raw, unweighted), the
-    per-level Newton counts, the fine grid's residual history and active-set changes, ..."""
+    per-level Newton counts, the fine grid's residual history and active-set changes, ..., and the
+    farm's ``raw_pair_seconds`` (s: one float64 FFT pair timed on the case's grid and ranks after the
+    solve, farm/case.py; None when not measured)."""
     out = {name: getattr(result, name) for name in RESULT_DIAGNOSTICS}
     out["fft_pairs_by_level"] = {str(n): v for n, v in result.fft_pairs_by_level.items()}  # JSON keys: str
     own = result.diagnostics
     out.update((name, own.get(name, absent)) for name, absent in SOLVER_DIAGNOSTICS)
+    out["raw_pair_seconds"] = None if raw_pair_seconds is None else float(raw_pair_seconds)
     return out

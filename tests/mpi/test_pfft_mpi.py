@@ -28,3 +28,11 @@ def test_radial_psd_identical_on_ranks(comm):
     q2, C2 = comm.bcast((q, C), root=0)
     assert np.array_equal(q, q2) and np.array_equal(C, C2)
     assert fft.pairs == 0
+
+
+def test_time_pair_same_figures_on_every_rank(comm):
+    """time_pair is collective and every rank returns rank 0's figures (the farm stores one of them)."""
+    fft = SlabFFT(comm, 32, planner="estimate", wisdom_file=False)
+    got = fft.time_pair(3)
+    assert comm.allgather(got) == [got] * comm.size and 0.0 < got[0] <= got[1]
+    assert fft.pairs == 0

@@ -457,6 +457,33 @@ class SlabFFT:
         (twin if twin.precision == "double" else self).n_apply += 1
         return real_out
 
+    def time_pair(self, repeats=3):
+        """The machine's pace now: wall seconds of one distributed pair (``apply`` in place, unit
+        multiplier, a fixed field) as (fastest, median) of ``repeats`` pairs timed between barriers
+        after an untimed one.  Collective; every rank returns rank 0's figures.  The pairs count
+        neither in the pair counters nor in ``apply_seconds``; the two arrays are freed after.
+        benchmarks/solver.py and peers.py call it the raw pair; the farm times one after each case
+        (``raw_pair_seconds`` in /diagnostics)."""
+        if repeats < 1:
+            raise ValueError(f"time_pair: repeats must be >= 1, got {repeats}")
+        counters, spent = (self.n_apply, self.n_forward, self.n_backward), _APPLY_SECONDS[0]
+        a = self.real_array()
+        a[...] = np.arange(a.shape[-1], dtype=a.dtype) % 7     # any field: FFTW's time does not depend on it
+        unit = self.fourier_array()
+        unit[...] = 1.0
+        self.apply(a, unit, a)
+        times = []
+        for _ in range(repeats):
+            self.comm.Barrier()
+            t0 = time.perf_counter()
+            self.apply(a, unit, a)
+            self.comm.Barrier()
+            times.append(time.perf_counter() - t0)
+        self.n_apply, self.n_forward, self.n_backward = counters
+        _APPLY_SECONDS[0] = spent
+        self.release_arrays()
+        return self.comm.bcast((min(times), float(np.median(times))), root=0)
+
     # ------------------------------------------------------------------ wavevectors & multipliers
     def wavevectors(self, L):
         """(qx, qy, q) in 1/m: qx shape (N, 1), qy shape (1, ncols), q = |q| shape local_fourier_shape."""

@@ -13,6 +13,12 @@ from mpi4py import MPI
 from vecontact.io.results import write_fields_file
 from vecontact.rows import solved_row
 
+#: FFT pairs timed after each case on its grid and ranks (``SlabFFT.time_pair``; the fastest is
+#: ``raw_pair_seconds`` in /diagnostics): the machine's pace while the case ran, which separates a
+#: code's cost from the machine's day (benchmarks/study_cost.py).  A few seconds a case at 4096^2,
+#: not counted in ``seconds``; 0: no probe.
+PACE_PAIRS = 3
+
 
 @dataclass(frozen=True)
 class Setup:
@@ -46,8 +52,9 @@ def solve_case(group, fft, heights, case, theory, setup, warm=None):
     """Solve ``case`` on the ranks of ``group`` (slab FFT ``fft``, local surface ``heights`` in m),
     warm-started from ``warm`` (the previous ContactResult of its chain, or None).
 
-    Returns (ContactResult, row, fields link): the row is ``theory`` filled with the solve (the
-    morphology columns on the group's leader only), the link None off the leader or without fields.
+    Returns (ContactResult, row, fields link, raw pair seconds): the row is ``theory`` filled with
+    the solve (the morphology columns on the group's leader only), the link None off the leader or
+    without fields, the last the fastest of PACE_PAIRS pairs timed after the solve (None if 0).
     """
     from vecontact.analysis.morphology import contact_morphology
     from vecontact.solver import solve_contact
@@ -59,7 +66,8 @@ def solve_case(group, fft, heights, case, theory, setup, warm=None):
     morphology = contact_morphology(contact, setup.L / fft.N) if group.rank == 0 else None
     row = solved_row(theory, res, fft.N, group.size, morphology)
     link = write_fields(group, fft, case, res, row, setup, contact) if setup.fields else None
-    return res, row, link
+    pace = fft.time_pair(PACE_PAIRS)[0] if PACE_PAIRS else None
+    return res, row, link, pace
 
 
 def write_fields(group, fft, case, res, row, setup, contact):

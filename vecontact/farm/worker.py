@@ -75,14 +75,14 @@ class Worker:
             warm = prev[2] if prev is not None and prev[:2] == (chain, pos - 1) else None
             prev = None
             t = time.perf_counter()
-            res, row, link = self.solve(group, self.chains[chain].cases[pos], warm)
+            res, row, link, pace = self.solve(group, self.chains[chain].cases[pos], warm)
             self.busy += time.perf_counter() - t
             prev = (chain, pos, res)
-            action = self.link.ask(group, Finished(chain, pos, row, link, diagnostics(res))
+            action = self.link.ask(group, Finished(chain, pos, row, link, diagnostics(res, raw_pair_seconds=pace))
                                    if group.rank == 0 else None)
 
     def solve(self, group, idx, warm):
-        """Case ``idx`` on the group: (ContactResult, row, fields link)."""
+        """Case ``idx`` on the group: (ContactResult, row, fields link, raw pair seconds): solve_case."""
         case = self.cases[idx]
         self.current = (idx, group.size)
         fft = self.fft(group, self.Ns[case.q1])
