@@ -184,8 +184,7 @@ class SlabFFT:
         kx = np.fft.fftfreq(N, 1.0 / N).round().astype(np.int64)
         self.kx = kx.reshape(N, 1)
         self.ky = np.arange(self.col_start, self.col_stop, dtype=np.int64).reshape(1, self.ncols)
-        self._scale = 1.0 / (float(N) * float(N))
-        self.norm = self._scale       # 1 / N^2, the backward transform's normalisation (``apply``'s normalised)
+        self.norm = 1.0 / (float(N) * float(N))    # the backward transform's normalisation (``apply``'s normalised)
 
         self.n_forward = 0
         self.n_backward = 0
@@ -372,7 +371,7 @@ class SlabFFT:
             self._b2a()
             _run(self._p_c2r, self._A, dst)
         if not scaled:
-            np.multiply(dst, self._scale * scale, out=real_out)     # x * 1.0 is x: scale 1 changes nothing
+            np.multiply(dst, self.norm * scale, out=real_out)     # x * 1.0 is x: scale 1 changes nothing
         elif dst is not real_out:
             np.copyto(real_out, dst)
 
@@ -407,7 +406,7 @@ class SlabFFT:
             real_out = self.real_array()
         else:
             self._check_real(real_out, "real_out")
-        np.multiply(fourier_in, self._scale, out=self._B)  # the copy c2r needs anyway, with the 1/N^2
+        np.multiply(fourier_in, self.norm, out=self._B)  # the copy c2r needs anyway, with the 1/N^2
         self._backward_from_B(real_out, scaled=True)
         self.n_backward += 1
         return real_out

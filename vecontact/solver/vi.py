@@ -77,8 +77,7 @@ class ViNewton:
         """y = (multiplier x~)_I with x~ = x on I, 0 elsewhere; ``shift_off``: minus the mean off I first."""
         st = self.state
         g = self.grid
-        g.scatter(idx, x.getArray(readonly=True))
-        st.fft.apply(g.buf, multiplier, g.out)
+        g.product_of(idx, x.getArray(readonly=True), multiplier, 1.0)
         ya = y.getArray()
         gather(g.out, idx, ya)
         if shift_off:   # sum and count off I: the grid's minus I's (not a masked sum: RESULTS.md)
