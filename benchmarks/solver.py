@@ -25,6 +25,10 @@ Output: a table, then as LAST line one JSON object:
                        (fft_pairs x raw pair)): the two factors' maxima over N >= 1024 are
                        solve_over_pairs_max (the work outside the pairs) and pair_in_solve_ratio_max (a
                        pair inside the solve against the raw pair; coarse-grid pairs at their own cost)
+  time_per_pair_ratio_paced  the same with each case's own raw pair: the fastest of --case-pairs timed
+                       right after the case's solves, in the same process (the machine's pace drifts
+                       between the start of a run and a case minutes later by more than the target's
+                       margin; the farm's pace probe does the same: docs/farm.md)
   seconds_4096         wall time of the 4096^2, A/A0 ~ 5 % solve on 2 ranks (max over v)
   overhead_max         max over the cases of (the solve's FFT pairs, fine-grid equivalents, coarse grids
                        included) / (the oracle solve's FFT pairs): the oracle solve (issue #15) is one
@@ -124,6 +128,9 @@ def worker(args):
                 r = solve_contact(fft, L, h, hn, v, sig, tolerance=args.tol, store=("pressure",),
                                   petsc_options=args.petsc)
                 runs.append((r.seconds, comm.allreduce(apply_seconds() - s0, op=MPI.MAX), r.fft_pairs))
+            # the raw pair again, right after the case: the machine's pace of the solve (it drifts by more
+            # than the target's margin between the start of a run and a case minutes later)
+            t_pair_case = fft.time_pair(args.case_pairs)[0] if args.case_pairs else None
             if len({p for _, _, p in runs}) != 1:
                 raise SystemExit(f"N={N} v={v} target={area}: the repeats counted different FFT pairs "
                                  f"{[p for _, _, p in runs]}: the solve is not deterministic")
@@ -138,7 +145,7 @@ def worker(args):
                       pairs=r.fft_pairs, by_level=r.fft_pairs_by_level, seconds=seconds,
                       seconds_median=median(t for t, _, _ in runs), repeats=len(runs),
                       pair_seconds=pair_seconds,
-                      t_pair=t_pair, levels=r.diagnostics["levels"], reason=r.reason,
+                      t_pair=t_pair, t_pair_case=t_pair_case, levels=r.diagnostics["levels"], reason=r.reason,
                       lin_history=r.diagnostics["linear_history"],
                       set_changes=r.diagnostics["active_set_changes"],
                       history=r.diagnostics["history"],
@@ -192,6 +199,8 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--planner", default="measure")
     ap.add_argument("--fft-repeats", type=int, default=15)
+    ap.add_argument("--case-pairs", type=int, default=5,
+                    help="raw pairs timed right after each case (its paced ratio: the fastest); 0: none")
     ap.add_argument("--calib-steps", type=int, default=2)
     ap.add_argument("--oracle-rtol", type=float, default=1e-8, help="rtol of the oracle solve")
     ap.add_argument("--oracle-max-it", type=int, default=2000, help="iteration cap of the oracle solve")
@@ -233,7 +242,8 @@ def main():
                "--areas", args.areas_4096 if (N >= 4096 and args.areas_4096) else ",".join(map(str, args.areas)),
                "--velocities", ",".join(map(str, args.velocities)), "--tol", str(args.tol),
                "--seed", str(args.seed), "--planner", args.planner,
-               "--fft-repeats", str(args.fft_repeats), "--calib-steps", str(args.calib_steps),
+               "--fft-repeats", str(args.fft_repeats), "--case-pairs", str(args.case_pairs),
+               "--calib-steps", str(args.calib_steps),
                "--oracle-rtol", str(args.oracle_rtol), "--oracle-max-it", str(args.oracle_max_it),
                "--repeat", str(args.repeat), "--petsc=" + args.petsc]
         if args.quick:
@@ -302,6 +312,9 @@ def _print_row(r):
                  + _oracle_text(r) +
                  f" in_pairs={r['pair_seconds'] / r['seconds']:.3f}"
                  f" pair_in_solve/raw={r['pair_seconds'] / (r['pairs'] * r['t_pair']):.2f}")
+        if r.get("t_pair_case"):
+            extra += (f" paced={r['seconds'] / (r['pairs'] * r['t_pair_case']):.2f}"
+                      f" (pair after {r['t_pair_case'] * 1e3:.2f} ms)")
         if r.get("repeats", 1) > 1:
             extra += f" fastest of {r['repeats']} (median t={r['seconds_median']:.2f}s)"
         if r.get("blas"):
@@ -347,7 +360,7 @@ def summarise(records):
 def _summarise_one(records):
     sn = [r for r in records if r["kind"] == "snes"]
     pk = {(r["N"], r["target"]): r for r in records if r["kind"] == "pk"}
-    ratios, iratios, tpp, outside, inside = [], [], [], [], []
+    ratios, iratios, tpp, paced, outside, inside = [], [], [], [], [], []
     for r in sn:
         if r["N"] >= 1024 and (r["N"], r["target"]) in pk:
             p = pk[(r["N"], r["target"])]
@@ -355,6 +368,8 @@ def _summarise_one(records):
             iratios.append(r["pairs"] / max(p["iterations"], 1))
         if r["N"] >= 1024:
             tpp.append(r["seconds"] / (r["pairs"] * r["t_pair"]))
+            if r.get("t_pair_case"):
+                paced.append(r["seconds"] / (r["pairs"] * r["t_pair_case"]))
             if r.get("pair_seconds"):
                 outside.append(r["seconds"] / r["pair_seconds"])
                 inside.append(r["pair_seconds"] / (r["pairs"] * r["t_pair"]))
@@ -379,6 +394,8 @@ def _summarise_one(records):
         pairs_growth_sizes=[sizes[0], sizes[-1]] if sizes else None,
         time_per_pair_ratio=max(tpp) if tpp else None,
         time_per_pair_ratio_median=median(tpp) if tpp else None,
+        time_per_pair_ratio_paced=max(paced) if paced else None,
+        time_per_pair_ratio_paced_median=median(paced) if paced else None,
         solve_over_pairs_max=max(outside) if outside else None,
         pair_in_solve_ratio_max=max(inside) if inside else None,
         seconds_4096=max(s4096) if s4096 else None,

@@ -32,6 +32,20 @@ def test_summary_without_blas(bench):
     assert out["pair_in_solve_ratio_max"] == pytest.approx(1.25, rel=1e-12)
     assert out["overhead_max"] == 3.5 and "blas" not in out
     assert out["pairs_growth"] == pytest.approx(200.0 / 80.0, rel=1e-12)
+    assert out["time_per_pair_ratio_paced"] is None       # no case timed its own raw pair
+
+
+def test_summary_paced_by_each_case_raw_pair(bench):
+    """time_per_pair_ratio_paced divides each case by the raw pair timed right after it (N >= 1024; a case
+    without one is left out of it, not of time_per_pair_ratio)."""
+    recs = [dict(_snes(1024, 10, 0.05, 100.0, 3.0, 0.02, 2.5, None), t_pair_case=0.025),
+            dict(_snes(2048, 10, 0.05, 200.0, 12.0, 0.04, 3.5, None), t_pair_case=0.05),
+            dict(_snes(2048, 0.01, 0.05, 100.0, 5.0, 0.04, 3.5, None), t_pair_case=None),
+            dict(_snes(512, 10, 0.05, 80.0, 1.0, 0.005, 1.5, None), t_pair_case=0.001)]
+    out = bench.summarise(recs)
+    assert out["time_per_pair_ratio"] == pytest.approx(1.5, rel=1e-12)             # 3/(100*0.02), 12/(200*0.04)
+    assert out["time_per_pair_ratio_paced"] == pytest.approx(1.2, rel=1e-12)       # 3/(100*0.025), 12/(200*0.05)
+    assert out["time_per_pair_ratio_paced_median"] == pytest.approx(1.2, rel=1e-12)
 
 
 def test_overhead_counts_only_converged_oracles(bench):
