@@ -58,11 +58,12 @@ def _info():
     import numpy
     import pyfftw
     import h5py
+    from vecontact.core.pfft import fftw_version
     lines = [f"vecontact {__version__}", f"python {sys.version.split()[0]}", f"numpy {numpy.__version__}",
              f"mpi4py {__import__('mpi4py').__version__}",
              f"MPI library: {MPI.Get_library_version().splitlines()[0].strip()}",
              f"h5py {h5py.__version__} (HDF5 {h5py.version.hdf5_version})",
-             f"pyfftw {pyfftw.__version__} (FFTW {_fftw_version()})"]
+             f"pyfftw {pyfftw.__version__} (FFTW {fftw_version()})"]
     try:
         from petsc4py import PETSc
         v = PETSc.Sys.getVersion()
@@ -73,17 +74,6 @@ def _info():
     if MPI.COMM_WORLD.rank == 0:
         print("\n".join(lines))
     return 0
-
-
-def _fftw_version():
-    try:
-        import ctypes
-        import pyfftw
-        lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
-        # fftw_version is a char array (not a pointer) in libfftw3
-        return (ctypes.c_char * 64).in_dll(lib, "fftw_version").value.decode()
-    except (OSError, ValueError, AttributeError):
-        return "version not exported"
 
 
 def _dispatch(argv):

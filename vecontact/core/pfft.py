@@ -22,6 +22,7 @@ when output arrays are passed (``out=None`` allocates the result array, for conv
 """
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import pickle
@@ -90,9 +91,22 @@ def column_split(nc, size):
     return [(int(starts[r]), int(starts[r + 1])) for r in range(size)]
 
 
+def fftw_version():
+    """The version string of the FFTW pyfftw runs on, with its SIMD codelets (e.g.
+    ``fftw-3.3.10-sse2-avx-avx2-avx2_128``; ./run builds that one on x86-64, README "Install")."""
+    try:
+        lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
+        # fftw_version is a char array (not a pointer) in libfftw3
+        return (ctypes.c_char * 64).in_dll(lib, "fftw_version").value.decode()
+    except (OSError, ValueError, AttributeError):
+        return "version not exported"
+
+
 def default_wisdom_file():
-    """``~/.cache/vecontact/fftw-wisdom-<hash>.pkl``; the hash covers host, CPU and pyfftw version."""
-    key = "|".join([platform.node(), platform.machine(), platform.processor(), pyfftw.__version__])
+    """``~/.cache/vecontact/fftw-wisdom-<hash>.pkl``; the hash covers host, CPU, pyfftw and FFTW
+    (a build's wisdom does not fit another's codelets)."""
+    key = "|".join([platform.node(), platform.machine(), platform.processor(), pyfftw.__version__,
+                    fftw_version()])
     h = hashlib.sha1(key.encode()).hexdigest()[:12]
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "vecontact", f"fftw-wisdom-{h}.pkl")
