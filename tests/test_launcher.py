@@ -38,6 +38,13 @@ def test_bad_rank_count():
     assert proc.returncode != 0 and "-n needs a positive number" in proc.stderr
 
 
+def test_bad_fftw_choice_stops_before_anything_is_built():
+    proc = _run(["info"], env={"VECONTACT_FFTW": "bogus"})
+    assert proc.returncode != 0 and proc.stdout == ""
+    assert proc.stderr.strip().splitlines() == [
+        "run: error: VECONTACT_FFTW must be auto, source or wheel, got 'bogus'"]
+
+
 def test_surface_command_three_ranks_matches_one(tmp_path):
     job = yaml.safe_load(open(os.path.join(ROOT, "jobs", "demo.yaml")))
     job["surface"].update(q1=[2.0e6], null_band=4, seeds=[3, 4])    # N = 64, uneven on 3 ranks
