@@ -20,6 +20,8 @@ import time
 
 import numpy as np
 
+from vecontact.core.pfft import fftw_version
+
 _FLAGS = {"measure": 0, "patient": 1 << 5, "estimate": 1 << 6}
 
 
@@ -31,7 +33,7 @@ class Build:
         self.real = np.float32 if single else np.float64
         cplx = np.complex64 if single else np.complex128
         self.lib = L = ctypes.CDLL(path, mode=ctypes.RTLD_LOCAL)
-        self.version = (ctypes.c_char * 64).in_dll(L, self.pre + "version").value.decode()
+        self.version = fftw_version(L, self.pre)
         fn = self._fn
         for name in ("plan_dft_r2c_2d", "plan_dft_c2r_2d"):
             f = fn(name)

@@ -91,13 +91,17 @@ def column_split(nc, size):
     return [(int(starts[r]), int(starts[r + 1])) for r in range(size)]
 
 
-def fftw_version():
-    """The version string of the FFTW pyfftw runs on, with its SIMD codelets (e.g.
-    ``fftw-3.3.10-sse2-avx-avx2-avx2_128``; ./run builds that one on x86-64, README "Install")."""
+def fftw_version(lib=None, prefix="fftw_"):
+    """The version string of an FFTW library, with its SIMD codelets (e.g.
+    ``fftw-3.3.10-sse2-avx-avx2-avx2_128``; ./run builds that one on x86-64, README "Install").
+
+    ``lib`` is a ``ctypes.CDLL``; by default the FFTW pyfftw runs on. ``prefix`` is ``"fftw_"``
+    for double precision, ``"fftwf_"`` for single."""
     try:
-        lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
+        if lib is None:
+            lib = ctypes.CDLL(pyfftw.pyfftw.__file__)
         # fftw_version is a char array (not a pointer) in libfftw3
-        return (ctypes.c_char * 64).in_dll(lib, "fftw_version").value.decode()
+        return (ctypes.c_char * 64).in_dll(lib, prefix + "version").value.decode()
     except (OSError, ValueError, AttributeError):
         return "version not exported"
 
