@@ -299,21 +299,26 @@ def _run_worker(cmd, env, N, ranks, label, args, records):
     return True
 
 
+def _per_pair(r, seconds, t_pair):
+    """``seconds`` / (the case's FFT pairs x ``t_pair``): time per pair in units of a raw pair."""
+    return seconds / (max(r["pairs"], 1e-9) * t_pair)
+
+
 def _print_row(r):
     if r["kind"] == "fft":
         print(f"{'fft':5s} N={r['N']:5d} ranks={r['ranks']} raw pair {r['t_pair'] * 1e3:8.2f} ms (min; median "
               f"{r.get('t_pair_median', float('nan')) * 1e3:.2f} ms)", flush=True)
         return
-    tpp = r["seconds"] / max(r["pairs"], 1e-9) / r["t_pair"]
+    tpp = _per_pair(r, r["seconds"], r["t_pair"])
     extra = ""
     if r["kind"] == "snes":
         lv = " ".join(f"{k}:{v:.0f}" for k, v in r["by_level"].items())
         extra = (f" lin={r['linear_iterations']:4d} mu={r['mu']:.6f} mu_geo={r['mu_geometric']:.4f} [{lv}]"
                  + _oracle_text(r) +
                  f" in_pairs={r['pair_seconds'] / r['seconds']:.3f}"
-                 f" pair_in_solve/raw={r['pair_seconds'] / (r['pairs'] * r['t_pair']):.2f}")
+                 f" pair_in_solve/raw={_per_pair(r, r['pair_seconds'], r['t_pair']):.2f}")
         if r.get("t_pair_case"):
-            extra += (f" paced={r['seconds'] / (r['pairs'] * r['t_pair_case']):.2f}"
+            extra += (f" paced={_per_pair(r, r['seconds'], r['t_pair_case']):.2f}"
                       f" (pair after {r['t_pair_case'] * 1e3:.2f} ms)")
         if r.get("repeats", 1) > 1:
             extra += f" fastest of {r['repeats']} (median t={r['seconds_median']:.2f}s)"
@@ -367,12 +372,12 @@ def _summarise_one(records):
             ratios.append(r["pairs"] / p["pairs"])
             iratios.append(r["pairs"] / max(p["iterations"], 1))
         if r["N"] >= 1024:
-            tpp.append(r["seconds"] / (r["pairs"] * r["t_pair"]))
+            tpp.append(_per_pair(r, r["seconds"], r["t_pair"]))
             if r.get("t_pair_case"):
-                paced.append(r["seconds"] / (r["pairs"] * r["t_pair_case"]))
+                paced.append(_per_pair(r, r["seconds"], r["t_pair_case"]))
             if r.get("pair_seconds"):
                 outside.append(r["seconds"] / r["pair_seconds"])
-                inside.append(r["pair_seconds"] / (r["pairs"] * r["t_pair"]))
+                inside.append(_per_pair(r, r["pair_seconds"], r["t_pair"]))
     sizes = sorted({r["N"] for r in sn})
     growth = []
     if sizes:
