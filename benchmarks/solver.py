@@ -20,7 +20,9 @@ Output: a table, then as LAST line one JSON object:
   pk_iter_ratio_max    the same against PK *iterations* (PK's nominal "one pair per iteration")
   pairs_growth         max over (v, A/A0) of pairs(N_max) / pairs(512)
   time_per_pair_ratio  max over N >= 1024 of solver seconds / (fft_pairs x raw pair seconds); the raw
-                       pair is the minimum of --fft-repeats timings (the median is printed too)
+                       pair is the minimum of --fft-repeats timings (the median is printed too); every
+                       FFTW plan a solve uses (coarse grids, float32 twins) is made before any clock,
+                       as the fine grid's (``t_plan`` of the fft record)
                        = (solver seconds / seconds inside SlabFFT.apply) x (seconds inside apply /
                        (fft_pairs x raw pair)): the two factors' maxima over N >= 1024 are
                        solve_over_pairs_max (the work outside the pairs) and pair_in_solve_ratio_max (a
@@ -78,7 +80,7 @@ def worker(args):
     from vecontact.solver import SolverSettings, solve_contact
     from vecontact.solver.contactset import oracle_solve
     from vecontact.solver.operator import ContactOperator
-    from vecontact.solver.warmstart import coarse_fft, fourier_transfer
+    from vecontact.solver.warmstart import coarse_fft, coarse_levels, fourier_transfer
 
     comm = MPI.COMM_WORLD
     N = args.n
@@ -90,6 +92,15 @@ def worker(args):
     fft = SlabFFT(comm, N, planner=args.planner)
     h = generate(fft, L, spec, args.seed)
     t_setup = time.perf_counter() - t0
+    # FFTW plans every SlabFFT a solve at N uses (the coarse grids', the float32 twins) before the clock,
+    # as the fine grid's above: else the first case's seconds carry them (0.2-0.4 s at 1024^2, a tenth of
+    # that solve; RESULTS.md)
+    t0 = time.perf_counter()
+    cfg = SolverSettings()
+    for n in coarse_levels(N, comm.size, cfg.coarse_min_n, cfg.coarse_levels):
+        coarse_fft(fft, n).single()
+    fft.single()
+    t_plan = time.perf_counter() - t0
 
     # raw distributed FFT pair; the minimum: its cost without the machine's noise (medians of 7 swung
     # 32-62 ms at 2048^2)
@@ -117,7 +128,8 @@ def worker(args):
             sig = s * erfinv(area)
         return sig
 
-    emit(dict(kind="fft", N=N, ranks=comm.size, t_pair=t_pair, t_pair_median=t_pair_median, t_setup=t_setup))
+    emit(dict(kind="fft", N=N, ranks=comm.size, t_pair=t_pair, t_pair_median=t_pair_median, t_setup=t_setup,
+              t_plan=t_plan))
     pk_done = {}
     for area in args.areas:
         for v in args.velocities:
@@ -307,7 +319,9 @@ def _per_pair(r, seconds, t_pair):
 def _print_row(r):
     if r["kind"] == "fft":
         print(f"{'fft':5s} N={r['N']:5d} ranks={r['ranks']} raw pair {r['t_pair'] * 1e3:8.2f} ms (min; median "
-              f"{r.get('t_pair_median', float('nan')) * 1e3:.2f} ms)", flush=True)
+              f"{r.get('t_pair_median', float('nan')) * 1e3:.2f} ms); setup {r['t_setup']:.2f} s, plans of the "
+              f"coarse grids and float32 twins {r.get('t_plan', float('nan')):.2f} s (not timed in the solves)",
+              flush=True)
         return
     tpp = _per_pair(r, r["seconds"], r["t_pair"])
     extra = ""
