@@ -243,3 +243,28 @@ def test_one_blas_thread_during_the_solve():
         assert set(blas_threads()) == {2}        # given back
     assert r.converged and seen
     assert all(set(s) == {1} for s in seen)
+
+
+def test_a_solve_leaves_the_collectors_freeze_as_it_found_it():
+    """snes.ncp_solve freezes what is alive for its duration (its end-of-level collection walks only
+    what it made) and thaws it after; a caller's own frozen objects stay frozen (it then freezes
+    nothing), and what the solve made is not left in the frozen generation."""
+    import gc
+    fft = _fft(64)
+    L = 1e-4
+    h = _random_surface(fft, L)
+    modulus = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    assert gc.get_freeze_count() == 0
+    r = solve_contact(fft, L, h, modulus, 1.0, 5e4)
+    assert r.converged, r.summary()
+    assert gc.get_freeze_count() == 0       # thawed (frozen objects can only die, not be added)
+    del r
+    gc.freeze()
+    try:
+        mine = gc.get_freeze_count()
+        r = solve_contact(fft, L, h, modulus, 1.0, 5e4)
+        assert r.converged, r.summary()
+        # not thawed (0), and nothing of the solve's frozen (more): some of the caller's may have died
+        assert 0.9 * mine < gc.get_freeze_count() <= mine
+    finally:
+        gc.unfreeze()
