@@ -257,7 +257,7 @@ def test_a_solve_leaves_the_collectors_freeze_as_it_found_it():
     assert gc.get_freeze_count() == 0
     r = solve_contact(fft, L, h, modulus, 1.0, 5e4)
     assert r.converged, r.summary()
-    assert gc.get_freeze_count() == 0       # thawed (frozen objects can only die, not be added)
+    assert gc.get_freeze_count() == 0       # thawed
     del r
     gc.freeze()
     try:

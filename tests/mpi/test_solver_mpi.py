@@ -103,8 +103,8 @@ def test_solver_state_is_freed_collective(comm):
     """After a solve on 2 ranks no solver state survives: petsc4py defers the destruction of collected
     objects on parallel communicators, and a deferred PC keeps its Python context (the whole solve's
     N^2 arrays) alive; a 4096^2 sweep grew by 0.9 GB per case and rank before this was cleaned up.
-    The automatic collector is off and the test collects nothing: the solve's own collection
-    (snes.ncp_solve, which walks only what the solve made) must have found them."""
+    The automatic collector is off during the solve and the test collects nothing: the solve itself
+    (its dropped references, and its own collection, which walks only what it made) must free them."""
     import gc
     from vecontact.solver.contactset import ContactSetStep
     from vecontact.solver.freeset import FreeSetStep
