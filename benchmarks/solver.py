@@ -80,6 +80,7 @@ def worker(args):
     from vecontact.solver import SolverSettings, solve_contact
     from vecontact.solver.contactset import oracle_solve
     from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.options import parse
     from vecontact.solver.warmstart import coarse_fft, coarse_levels, fourier_transfer
 
     comm = MPI.COMM_WORLD
@@ -96,7 +97,7 @@ def worker(args):
     # as the fine grid's above: else the first case's seconds carry them (0.2-0.4 s at 1024^2, a tenth of
     # that solve; RESULTS.md)
     t0 = time.perf_counter()
-    cfg = SolverSettings()
+    cfg = SolverSettings().with_options(parse(args.petsc))    # the solves' own settings (their -vc_ options)
     for n in coarse_levels(N, comm.size, cfg.coarse_min_n, cfg.coarse_levels):
         coarse_fft(fft, n).single()
     fft.single()
