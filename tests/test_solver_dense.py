@@ -123,18 +123,25 @@ def test_warm_start_from_other_load():
     compare(res, f, ref, h, sigma0, name, "snes warm")
 
 
-@pytest.mark.parametrize("step, cycle", [("contact", 0), ("free", 0), ("free", 4)])
+# cycles: caps of 3 iterations, so the first step uses its cap and the cycles start (StepPolicy.cycling),
+# by cycle_after_cap, or by cycle_after_cap_large where the operator's stiffness range exceeds
+# cycle_range_max (0: every grid's)
+_CAP = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 3}
+_RANGE = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 1000, "vc_cycle_after_cap_large": 3,
+          "vc_cycle_range_max": 0}
+
+
+@pytest.mark.parametrize("step, cycle, gate", [("contact", 0, {}), ("free", 0, {}), ("free", 4, _CAP),
+                                               ("free", 4, _RANGE)], ids=["contact", "free", "cycles", "range"])
 @pytest.mark.parametrize("v,sigma0", [(1.0, 2e4), (30.0, 5e4)])
-def test_newton_step_modes_vs_dense(step, cycle, v, sigma0):
+def test_newton_step_modes_vs_dense(step, cycle, gate, v, sigma0):
     """Both ways of solving the Newton step (on the contact set / on the free set, chosen by area in
     ``auto``; the free set by plain GMRES, or by FGMRES over GMRES(4) cycles once a step used its cap)
     forced for a whole solve: the same exact solution."""
     N, name = 32, "hn"
     h = surface(N)
     ref = reference(N, name, v, sigma0)
-    opts = {"vc_contact_step": step, "vc_free_cycle": cycle}
-    if cycle:   # caps of 3 iterations: the first step uses its cap, so the cycles start (StepPolicy.cycling)
-        opts.update(vc_lin_maxit_changing=3, vc_cycle_after_cap=3)
+    opts = {"vc_contact_step": step, "vc_free_cycle": cycle, **gate}
     res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF, coarse=False,
                         petsc_options=opts)
     compare(res, f, ref, h, sigma0, name, f"snes step={step} v={v}")

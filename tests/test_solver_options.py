@@ -119,6 +119,18 @@ def test_step_area_by_stiffness_range():
     assert SolverSettings(contact_step_range_max=1e6).step_area(7.3e5) == 0.3
 
 
+def test_cycle_cap_by_stiffness_range():
+    """cycle_after_cap_large where the stiffness range exceeds cycle_range_max: the paper's compound
+    at 10 m/s on 2048^2 (2.84e5) and 4096^2 (7.31e5), at 1 m/s on 4096^2 (2.93e5); not at 1024^2, 10 m/s
+    (1.08e5) nor 2048^2, 1 m/s (1.07e5), where early cycles lose [RESULTS.md]."""
+    s = SolverSettings()
+    assert (s.cycle_after_cap, s.cycle_after_cap_large, s.cycle_range_max) == (80, 40, 1.5e5)
+    assert s.cycle_cap(1.0) == s.cycle_cap(1.08e5) == s.cycle_cap(1.5e5) == 80
+    assert s.cycle_cap(1.5001e5) == s.cycle_cap(2.84e5) == s.cycle_cap(7.31e5) == 40
+    assert SolverSettings(cycle_range_max=1e6).cycle_cap(7.31e5) == 80
+    assert SolverSettings(cycle_after_cap_large=80).cycle_cap(7.31e5) == 80
+
+
 def test_restart_lengths():
     """The cap, unless the basis exceeds the memory budget: 4096^2 on 2 ranks (8 Mi local points,
     3 GB): GMRES 43, FGMRES 21; never below restart_min.  The contact-set steps' inner FGMRES has the

@@ -95,6 +95,19 @@ def test_cycles_after_a_capped_free_set_step(first_mode, cap, first_its, cycles)
     assert not off.cycling                             # free_cycle 0: never
 
 
+@pytest.mark.parametrize("stiffness_range, cycles", [(1.0e5, False), (2.9e5, True)])
+def test_cycles_after_a_first_cap_at_high_range(stiffness_range, cycles):
+    """Above cycle_range_max a whole first cap of 40 (cycle_after_cap_large) starts the cycles."""
+    s = SolverSettings(free_cycle=20, lin_maxit_changing=40, cycle_after_cap=80, cycle_after_cap_large=40,
+                       cycle_range_max=1.5e5)
+    p = StepPolicy(s, 1e-8, stiffness_range=stiffness_range)
+    _steps_with_iterations(p, [(None, (1.0, -1, "free")), (40, (0.1, 500, "free"))])
+    assert p.cycle_cap == (40 if cycles else 80) and p.cycling is cycles
+    under = StepPolicy(s, 1e-8, stiffness_range=stiffness_range)
+    _steps_with_iterations(under, [(None, (1.0, -1, "free")), (39, (0.1, 500, "free"))])
+    assert not under.cycling                           # under its cap: plain GMRES stays
+
+
 def test_wandering_tightens_down_to_the_floors():
     """Each wandering step: rtol x tighten_factor down to lin_rtol_min, the iteration cap x
     tighten_maxit_factor up to ksp_max_it."""

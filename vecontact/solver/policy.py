@@ -65,12 +65,15 @@ class StepPolicy:
     """Krylov tolerances of the Newton steps of one SNES solve (see the module docstring).
 
     ``atol``: the absolute tolerance of an exact free-set step (tol / kappa, h_rms units); ``own``: False
-    when the user's PETSc options (-ksp_rtol, -snes_ksp_ew, ...) decide the tolerances instead.
+    when the user's PETSc options (-ksp_rtol, -snes_ksp_ew, ...) decide the tolerances instead;
+    ``stiffness_range``: max|m_q|/min|m_q| of the grid (ContactOperator.stiffness_range), which sets
+    when the free-set steps start their cycles.
     ``changes`` and ``residuals`` keep the history the rules read (and the solver reports).
     """
 
-    def __init__(self, settings, atol, own=True, tol=None):
+    def __init__(self, settings, atol, own=True, tol=None, stiffness_range=0.0):
         self.settings = settings
+        self.cycle_cap = settings.cycle_cap(stiffness_range)   # record_iterations
         self.tol = tol             # the solve's convergence tolerance (mixed: None, never)
         self.own = own
         self.lin_rtol = settings.lin_rtol
@@ -89,15 +92,16 @@ class StepPolicy:
 
     def record_iterations(self, iterations):
         """Krylov iterations of the latest step.  A changing free-set step that used the whole of a
-        tightened cap (at least cycle_after_cap) announces long solves, where the plain GMRES basis costs
-        more orthogonalisation than the extra iterations of FGMRES over GMRES(free_cycle) cycles:
-        ``cycling`` turns on for the rest of the solve.  Solves whose steps stay under the first caps
-        (slow sliding) keep plain GMRES, where the cycles lose [RESULTS.md]."""
+        tightened cap (at least ``cycle_cap``: SolverSettings.cycle_cap of the grid's stiffness range)
+        announces long solves, where the plain GMRES basis costs more orthogonalisation than the extra
+        iterations of FGMRES over GMRES(free_cycle) cycles: ``cycling`` turns on for the rest of the
+        solve.  Solves whose steps stay under the first caps (slow sliding) keep plain GMRES, where the
+        cycles lose [RESULTS.md]."""
         s = self.settings
         if self._last is None or s.free_cycle == 0:
             return
         mode, change, cap = self._last
-        if mode == "free" and change != 0 and cap >= s.cycle_after_cap and iterations >= cap:
+        if mode == "free" and change != 0 and cap >= self.cycle_cap and iterations >= cap:
             self.cycling = True
 
     def step(self, change, mode):

@@ -75,6 +75,9 @@ class SolverSettings:
                             "[RESULTS.md]", lo=0)
     cycle_after_cap: int = _knob(80, "cycles start after a changing free-set step used a cap of >= this [RESULTS.md]",
                                  lo=1)
+    cycle_after_cap_large: int = _knob(40, "the same where max|m_q|/min|m_q| > cycle_range_max [RESULTS.md]", lo=1)
+    cycle_range_max: float = _knob(1.5e5, "stiffness range above which cycle_after_cap_large applies [RESULTS.md]",
+                                   lo=0)
     cycle_max_it: int = _knob(800, "Krylov iteration cap of an exact free-set step in cycles [RESULTS.md]", lo=1)
     measure_stop: str = _knob("on", "on: an exact step stops once its update meets the SNES's test "
                               "(measurestop.py) [RESULTS.md]", choices=("on", "off"))
@@ -133,6 +136,15 @@ class SolverSettings:
         if stiffness_range > self.contact_step_range_max:
             return self.contact_step_area_large
         return self.contact_step_area
+
+    def cycle_cap(self, stiffness_range):
+        """The smallest tightened iteration cap whose exhaustion by a changing free-set step starts the
+        cycles (StepPolicy.record_iterations) on a grid whose stiffness has the range
+        max|m_q|/min|m_q|: early at high range (fast sliding, large N), where the steps' Krylov solves
+        are long from the first cap on; later elsewhere, where the cycles' extra iterations lose."""
+        if stiffness_range > self.cycle_range_max:
+            return self.cycle_after_cap_large
+        return self.cycle_after_cap
 
     def restart(self, n_local, vectors=1, reserve=0):
         """GMRES restart of the free-set steps (n_local: local free points; GMRES: 1 basis vector an

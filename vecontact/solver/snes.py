@@ -255,7 +255,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
     else:
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF),
-                            tol=tol)
+                            tol=tol, stiffness_range=op.stiffness_range())
         work = Workspace(fft)            # both step types' whole-grid arrays, held once
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))
