@@ -30,8 +30,9 @@ backward transform (``mixed``, subset.Mixed) while it must cut its residual by a
 mixed_reduction_max (``mixed_reduction``): such a solve stalls near 1e-7 of its start (the float32
 rounding of A z), and the Newton residual that judges it is formed in float64.
 
-Free-set steps start as plain GMRES; after a changing free-set step that used the whole of a tightened
-iteration cap they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
+Free-set steps start as plain GMRES; after a changing free-set step that used the whole of an iteration
+cap of at least SolverSettings.cycle_cap (a tightened cap; the first one on grids of high stiffness
+range) they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
 """
 from __future__ import annotations
 
