@@ -126,7 +126,7 @@ def test_warm_start_from_other_load():
 # cycles: caps of 3 iterations, so the first step uses its cap and the cycles start (StepPolicy.cycling),
 # by cycle_after_cap, or by cycle_after_cap_large where the operator's stiffness range exceeds
 # cycle_range_max (0: every grid's)
-_CAP = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 3}
+_CAP = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 3, "vc_cycle_range_max": 1e12}
 _RANGE = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 1000, "vc_cycle_after_cap_large": 3,
           "vc_cycle_range_max": 0}
 

@@ -76,7 +76,7 @@ def _steps_with_iterations(policy, steps):
 @pytest.mark.parametrize("first_mode, cap, first_its, cycles", [
     ("free", 80, 80, True),      # a changing free-set step used a whole cap of >= 80: long solves, cycles
     ("free", 80, 79, False),     # under its cap: plain GMRES stays
-    ("free", 40, 40, False),     # a whole first cap of 40 (0.1-1 m/s, where the cycles lose) is not enough
+    ("free", 40, 40, False),     # a whole first cap of 40 at low stiffness range (where the cycles lose) is not enough
     ("contact", 80, 80, False),  # the cap of a contact-set step says nothing of the free set's
 ])
 def test_cycles_after_a_capped_free_set_step(first_mode, cap, first_its, cycles):
