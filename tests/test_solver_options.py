@@ -122,7 +122,7 @@ def test_step_area_by_stiffness_range():
 def test_cycle_cap_by_stiffness_range():
     """cycle_after_cap_large where the stiffness range exceeds cycle_range_max: the paper's compound
     at 10 m/s on 2048^2 (2.84e5) and 4096^2 (7.31e5), at 1 m/s on 4096^2 (2.93e5); not at 1024^2, 10 m/s
-    (1.08e5) nor 2048^2, 1 m/s (1.07e5), where early cycles lose [RESULTS.md]."""
+    (1.08e5) nor 2048^2, 1 m/s (1.07e5), where early cycles lost at 41 % [RESULTS.md]."""
     s = SolverSettings()
     assert (s.cycle_after_cap, s.cycle_after_cap_large, s.cycle_range_max) == (80, 40, 1.5e5)
     assert s.cycle_cap(1.0) == s.cycle_cap(1.08e5) == s.cycle_cap(1.5e5) == 80
