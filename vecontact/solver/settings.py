@@ -138,10 +138,10 @@ class SolverSettings:
         return self.contact_step_area
 
     def cycle_cap(self, stiffness_range):
-        """The smallest tightened iteration cap whose exhaustion by a changing free-set step starts the
-        cycles (StepPolicy.record_iterations) on a grid whose stiffness has the range
-        max|m_q|/min|m_q|: early at high range (fast sliding, large N), where the steps' Krylov solves
-        are long from the first cap on; later elsewhere, where the cycles' extra iterations lose."""
+        """The smallest iteration cap whose exhaustion by a changing free-set step starts the cycles
+        (StepPolicy.record_iterations) on a grid whose stiffness has the range max|m_q|/min|m_q|: the
+        first cap at high range (fast sliding, large N), where the steps' Krylov solves are long from
+        the start; a tightened one elsewhere, where the cycles' extra iterations lose."""
         if stiffness_range > self.cycle_range_max:
             return self.cycle_after_cap_large
         return self.cycle_after_cap
