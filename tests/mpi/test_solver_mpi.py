@@ -126,10 +126,11 @@ def test_solver_state_is_freed_collective(comm):
         assert alive == [], (step, alive)
 
 
-@pytest.mark.parametrize("N, v, sigma0", [(256, 10.0, 1e6), (512, 0.01, 4.5e4)])
+@pytest.mark.parametrize("N, v, sigma0", [(256, 10.0, 1e6), (512, 0.01, 5e4)])
 def test_measure_stop_collective(comm, N, v, sigma0):
     """The measure stop of exact steps (measurestop.py) on 2 ranks, on the free set (256^2, A/A0 ~ 0.58)
-    and on the contact set (512^2, ~ 0.27): its looks are collective (a trial iterate's pressure and
+    and on the contact set (512^2, ~ 0.29; at 4.5e4 the edge-corrected steps converge before an exact
+    step looks): its looks are collective (a trial iterate's pressure and
     measure, the vectors of the step's current set) and give the same stop on every rank; the answer
     is one rank's to the solver's tolerance (A/A0 to a few contact-line points, mu to 1e-6)."""
     from vecontact.core.pfft import SlabFFT
@@ -230,3 +231,34 @@ def test_single_steps_collective(comm, sigma0, mode, options):
     assert res.diagnostics["step_modes"][-1][1] == mode
     assert res.converged and one.converged
     assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
+
+
+def test_edge_term_collective(comm):
+    """The edge correction of the contact-set preconditioner (edge.py) on 2 ranks: the halo rows of the
+    contact set and of x come from the neighbouring slabs (and wrap around), so each rank's term is
+    its rows of the one-rank term, to FFT rounding of the kernel (rtol 1e-12 of the term's largest
+    entry)."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.edge import EdgeCorrection
+    from vecontact.solver.operator import ContactOperator
+    N, w = 32, 2
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=9)
+    act = h > np.quantile(h, 0.7)
+    x = np.random.default_rng(3).standard_normal(N * N)
+    terms, slabs = [], []
+    for c in (comm, comm.Split(comm.rank, 0)):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        rows = slice(fft.row_start, fft.row_stop)
+        slabs.append(rows)
+        op = ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows])
+        a = act[rows]
+        idx = np.flatnonzero(a.ravel())
+        ec = EdgeCorrection(op, w, 0.2)
+        ec.build(a, idx)
+        terms.append(ec.apply(x[fft.row_start * N:fft.row_stop * N][idx]))
+    two, one = terms
+    full = np.zeros((N, N))
+    full[act] = one
+    ref = full[slabs[0]][act[slabs[0]]]
+    assert act[:2].any() and act[-2:].any() and act[N // 2 - 2:N // 2 + 2].any()     # halos hold contact
+    assert np.abs(two - ref).max() <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0

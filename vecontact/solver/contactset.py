@@ -17,14 +17,17 @@ an operator on the zero-sum vectors of C: the restricted compliance (single-laye
 contact set), positive definite in the elastic case, non-symmetric but coercive for a viscoelastic
 modulus.  It is preconditioned by the restricted stiffness B = P m_CC P (the opposite-order, "Calderon"
 preconditioner: m and c are exact inverses on the full grid, the restriction only perturbs it near the
-contact edges, so the iteration count grows only mildly with N).  The Krylov vectors live on C: at
-A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little next to the FFTs.
+contact edges, so the iteration count grows only mildly with N).  At the edges B gets a local
+correction, a sparse term from small dense inverses of c on windows (edge.py; SolverSettings.edge_window,
+0: none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
+orthogonalisation costs little next to the FFTs.
 
 Each step starts its inner Krylov solve afresh.  Krylov recycling across the steps (GCRO with the
 directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pairs but cost 11-50 % more
 wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).
 
-Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B).
+Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), and one pair per grid and
+solve for the edge correction's kernel.
 The inner KSP has the options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning,
 so its residual norm is the gap error on C in units of h_rms; restart SolverSettings.inner_restart).
 """
@@ -35,6 +38,7 @@ from dataclasses import replace
 import numpy as np
 from mpi4py import MPI
 
+from vecontact.solver.edge import EdgeCorrection
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
 from vecontact.solver.subset import Restricted, SubsetStep, gather
 
@@ -55,6 +59,8 @@ class ContactSetStep(SubsetStep):
     def __init__(self, op, kappa, PETSc, prefix, settings, work=None):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings, work)
         self.free = np.zeros(self.shape, dtype=bool)   # the free set F
+        w = settings.edge_window
+        self.edge = EdgeCorrection(op, w, settings.edge_drop) if w > 0 else None
 
     # ------------------------------------------------------------------ SubsetStep hooks
     def defaults(self, n_loc):
@@ -65,7 +71,8 @@ class ContactSetStep(SubsetStep):
         return Restricted(self, self.op.c, self._remove_mean)
 
     def preconditioner(self):
-        return Restricted(self, self.op.m, self._remove_mean)
+        local = self.edge.apply if self.edge is not None else None
+        return Restricted(self, self.op.m, self._remove_mean, local=local)
 
     def step_pc(self):
         """B, with float32 pairs where the inner KSP is vecontact's FGMRES and float32_pc() holds: a
@@ -79,6 +86,10 @@ class ContactSetStep(SubsetStep):
     def _remove_mean(self, y, full):
         y -= self.mean_C(y)
 
+    def release(self):
+        super().release()
+        self.edge = None
+
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
         """Mean over the (global) contact set of the C-vector ``a``."""
@@ -90,6 +101,8 @@ class ContactSetStep(SubsetStep):
             raise ValueError("empty contact set")
         np.logical_not(act, out=self.free)
         self.select(np.flatnonzero(act.ravel()), n_active)
+        if self.edge is not None:
+            self.edge.build(act, self.idx)
 
     # ------------------------------------------------------------------ PC interface
     def apply(self, pc, x, y):
@@ -139,7 +152,7 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0))   # today's step, float64
+    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0, edge_window=0))   # today's step, float64
     r = y = None
     try:
         t0 = fft.transforms

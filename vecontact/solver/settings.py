@@ -100,6 +100,10 @@ class SolverSettings:
                                  choices=("single", "double"))
     pc_range_max: float = _knob(1e6, "the preconditioners of FGMRES (free-set cycles, contact-set stiffness) with "
                                 "float32 FFT pairs while max|m_q|/min|m_q| <= this (0: never) [RESULTS.md]", lo=0)
+    edge_window: int = _knob(2, "contact-set steps: half width of the windows of the preconditioner's edge "
+                             "correction (edge.py; 0: none) [RESULTS.md]", lo=0, hi=3)
+    edge_drop: float = _knob(0.2, "... its entries below this fraction of their row's largest are dropped [RESULTS.md]",
+                             lo=0, hi=1)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)

@@ -114,20 +114,22 @@ class Restricted:
     """y = (scale multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python
     Mat and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT; ``scale``:
     a number (SlabFFT.apply: no scaled copy of the multiplier).  ``grid``: the Grid where the product is
-    formed (default the step's float64 one)."""
+    formed (default the step's float64 one).  ``local``: a term added to y before ``post``, local(x)
+    (a float64 array of y's size, or None for none; contactset.py's edge correction)."""
 
-    def __init__(self, step, multiplier, post=None, grid=None, scale=1.0):
+    def __init__(self, step, multiplier, post=None, grid=None, scale=1.0, local=None):
         self.step = step
         self.multiplier = multiplier
         self.post = post
         self.grid = step.grid if grid is None else grid
         self.scale = float(scale)
+        self.local = local
 
     def on(self, grid):
         """The same product formed on ``grid`` (the multiplier cast to its precision)."""
         if grid is self.grid:
             return self
-        return Restricted(self.step, grid.cast(self.multiplier), self.post, grid, self.scale)
+        return Restricted(self.step, grid.cast(self.multiplier), self.post, grid, self.scale, self.local)
 
     def matvec(self, x, y):
         """y = the product of x (arrays of the local points of S; y of another precision than the
@@ -139,6 +141,10 @@ class Restricted:
             gather(g.out, idx, y)
         else:                           # take's own casting copies (and casts) y's old contents first
             np.copyto(y, gather(g.out, idx, g.gathered(idx.size)), casting="same_kind")
+        if self.local is not None:
+            term = self.local(x)
+            if term is not None:
+                np.add(y, term, out=y, casting="same_kind")
         if self.post is not None:
             self.post(y, g.out)
 

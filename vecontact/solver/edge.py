@@ -1,0 +1,192 @@
+"""The local edge correction of the contact-set steps' preconditioner (contactset.py).
+
+The contact-set step solves A y = b with A = P c_CC P, preconditioned by B = P m_CC P (c = 1/m).  On the
+whole grid m = c^-1, and for a subset C the exact inverse is the Schur complement
+
+    (c_CC)^-1 = m_CC - m_CF (m_FF)^-1 m_FC,
+
+so B errs only near the contact edges, where m_CF is large: that is where the inner iterations go
+(RESULTS.md, "Growth of the oracle solve").  This module adds a local estimate of the missing term.
+For a contact point i with a free point within ``w`` grid points (Chebyshev), W the (2w+1)^2 window
+centred on i:
+
+    (B_edge r)_i = (B r)_i + sum_{j in W and C} [ inv(c_{W and C})_ij - inv(c_W)_ij ] r_j,
+
+the local inverse of the compliance on the window's contact points minus that on the whole window
+(whose own edges m does not have).  Away from the edges both inverses are the same and the term
+vanishes.  The windows' inverses depend only on which window points are in contact (a mask of
+(2w+1)^2 bits), so one small dense solve is made per mask and grid, and reused by every later Newton
+step on that grid.  Applying the term is one sparse product on C (no FFT pair) and, on several ranks,
+an exchange of the contact values in w rows with each neighbouring slab; the set-up costs one FFT
+pair per grid (the compliance's kernel c(x)).
+
+Units: nondimensional (operator.py); the term maps a gap error on C (h_rms) to a pressure (sigma0).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+
+__all__ = ["EdgeCorrection"]
+
+
+class EdgeCorrection:
+    """The edge term of one grid's contact-set preconditioner: ``build(act, idx)`` for each new contact
+    set (collective), then ``apply(x)`` (collective) returns the term for a C-vector x.
+
+    ``op``: the ContactOperator of the grid; ``w``: the window's half width (grid points, >= 1);
+    ``drop``: a row's entries below this fraction of its largest are dropped.
+    ``usable`` is False on a grid smaller than the window or where a rank holds fewer than w rows (the
+    halo would span several slabs): the step then runs without the term (the same answer, more
+    iterations)."""
+
+    def __init__(self, op, w, drop):
+        self.op = op
+        self.fft = fft = op.fft
+        self.comm = fft.comm
+        self.w = w = int(w)
+        self.drop = float(drop)
+        a, b = np.divmod(np.arange((2 * w + 1) ** 2), 2 * w + 1)
+        self.da, self.db = a - w, b - w                      # window offsets (rows, columns), centre K // 2
+        if not 1 <= w <= 3:
+            raise ValueError(f"edge window half width {w}: expected 1, 2 or 3 (a window's mask is one int64)")
+        # a window must not wrap onto itself, nor a halo span more than one neighbouring slab
+        self.usable = 2 * w + 1 <= fft.N and self.comm.allreduce(fft.nrows, op=MPI.MIN) >= w
+        self._base = None                                    # (c_W, centre row of inv(c_W))
+        self._codes = np.zeros(0, dtype=np.int64)            # masks seen on this grid, sorted
+        self._rows = np.zeros((0, self.da.size))             # their correction rows
+        self.S = None
+        self._x = np.zeros(0)
+
+    # ------------------------------------------------------------------ set-up
+    def _kernel_table(self):
+        """c_W (K x K, c(x_a - x_b) over the window's points) and the centre row of its inverse.  One FFT
+        pair: the compliance's response to a unit pressure at the origin, its values at the offsets
+        |d| <= 2w gathered to every rank."""
+        if self._base is None:
+            fft, w, N = self.fft, self.w, self.fft.N
+            d = fft.real_array()
+            d[...] = 0.0
+            if fft.row_start == 0:
+                d[0, 0] = 1.0
+            kern = fft.apply(d, self.op.c)
+            off = np.arange(-2 * w, 2 * w + 1)
+            table = np.zeros((off.size, off.size))
+            for i, r in enumerate(off % N):
+                if fft.row_start <= r < fft.row_stop:
+                    table[i] = kern[r - fft.row_start, off % N]
+            self.comm.Allreduce(MPI.IN_PLACE, table, op=MPI.SUM)
+            cW = table[(self.da[:, None] - self.da[None, :]) + 2 * w, (self.db[:, None] - self.db[None, :]) + 2 * w]
+            self._base = (cW, np.linalg.inv(cW)[cW.shape[0] // 2])
+        return self._base
+
+    def _correction_rows(self, codes):
+        """The correction row of each window mask in ``codes`` (sorted, unique): solved for the masks
+        not seen before on this grid, then looked up."""
+        known = self._codes
+        new = codes[~np.isin(codes, known)] if known.size else codes
+        if new.size:
+            cW, full = self._kernel_table()
+            K = cW.shape[0]
+            mask = ((new[:, None] >> np.arange(K)) & 1).astype(bool)
+            # the transpose of c on the window's contact points, identity on its free ones
+            At = np.where(mask[:, :, None] & mask[:, None, :], cW.T[None], 0.0)
+            diag = np.arange(K)
+            At[:, diag, diag] = np.where(mask, At[:, diag, diag], 1.0)
+            e = np.zeros((new.size, K, 1))
+            e[:, K // 2, 0] = 1.0
+            rows = np.linalg.solve(At, e)[..., 0]                # row K//2 of the inverse
+            rows = (rows - full[None, :]) * mask
+            # the small entries cost products and save no iterations [RESULTS.md]
+            big = np.abs(rows).max(axis=1, keepdims=True)
+            rows[np.abs(rows) < self.drop * big] = 0.0
+            allc = np.concatenate([known, new])
+            order = np.argsort(allc, kind="stable")
+            self._codes = allc[order]
+            self._rows = np.concatenate([self._rows, rows])[order]
+        return self._rows[np.searchsorted(self._codes, codes)]
+
+    def _halo(self, send_prev, send_next, recv_prev, recv_next):
+        """recv_prev = the previous slab's send_next, recv_next = the next slab's send_prev (periodic)."""
+        comm = self.comm
+        if comm.size == 1:
+            recv_prev[...] = send_next
+            recv_next[...] = send_prev
+            return
+        prev, nxt = (comm.rank - 1) % comm.size, (comm.rank + 1) % comm.size
+        comm.Sendrecv(send_prev, dest=prev, sendtag=71, recvbuf=recv_next, source=nxt, recvtag=71)
+        comm.Sendrecv(send_next, dest=nxt, sendtag=72, recvbuf=recv_prev, source=prev, recvtag=72)
+
+    def build(self, act, idx):
+        """The term for the contact set ``act`` (bool, local rows), ``idx`` its flat local points
+        (sorted): the sparse rows of the edge points and the halo plan of ``apply``."""
+        if not self.usable:
+            self.S = None
+            return
+        w, N = self.w, self.fft.N
+        n = act.shape[0]
+        side = 2 * w + 1
+        rows = np.empty((n + 2 * w, N), dtype=np.uint8)      # act with w halo rows above and below
+        rows[w:w + n] = act
+        self._halo(rows[w:2 * w], rows[n:n + w], rows[:w], rows[n + w:])
+        ext = np.concatenate([rows[:, N - w:], rows, rows[:, :w]], axis=1)   # + w columns each side
+        Ne = N + 2 * w
+        # the edge points: contact points whose window is not all in contact (separable erosion)
+        cols = ext[:, :N].copy()
+        for b in range(1, side):
+            cols &= ext[:, b:b + N]
+        inner = cols[:n].copy()
+        for a in range(1, side):
+            inner &= cols[a:a + n]
+        edge = np.flatnonzero(act.ravel() > inner.ravel())
+        ie, je = np.divmod(edge, N)
+        base = (ie + w) * Ne + je + w                        # the edge points in the padded grid
+        # each edge point's window mask as an integer, bit a*side + b for the offset (a - w, b - w)
+        kind = np.int32 if side * side < 31 else np.int64
+        codes = np.zeros(edge.size, dtype=kind)
+        flat = ext.ravel()
+        for k, off in enumerate(self.da * Ne + self.db):
+            codes |= np.left_shift(flat[base + off], k, dtype=kind)
+        # positions in the extended C-vector: local C, then the halo rows' contact points (row-major)
+        pos = np.full(ext.shape, -1, dtype=np.int32)
+        core = pos[:, w:w + N]
+        n_prev, n_next = int(np.count_nonzero(rows[:w])), int(np.count_nonzero(rows[n + w:]))
+        core[w:w + n][act] = np.arange(idx.size, dtype=np.int32)
+        core[:w][rows[:w].view(bool)] = np.arange(idx.size, idx.size + n_prev, dtype=np.int32)
+        core[n + w:][rows[n + w:].view(bool)] = np.arange(idx.size + n_prev, idx.size + n_prev + n_next,
+                                                          dtype=np.int32)
+        pos[:, :w] = pos[:, N:N + w]
+        pos[:, N + w:] = pos[:, w:2 * w]
+        pos = pos.ravel()
+        # the kept entries of each mask's row, then of each edge point's (only they are gathered)
+        uniq = np.unique(codes)
+        vals = self._correction_rows(uniq)
+        keep = vals != 0.0
+        per_mask = keep.sum(axis=1)
+        first = np.cumsum(per_mask) - per_mask
+        which = np.searchsorted(uniq, codes)
+        count = per_mask[which]
+        indptr = np.zeros(idx.size + 1, dtype=np.int32)
+        indptr[pos[base] + 1] = count
+        np.cumsum(indptr, out=indptr)         # int32: S has far fewer than 2**31 entries on a rank
+        owner = np.repeat(np.arange(edge.size), count)
+        src = np.arange(indptr[-1]) - np.repeat(indptr[pos[base]] - first[which], count)
+        k = np.nonzero(keep)[1][src]
+        self.S = sp.csr_matrix((vals[keep][src], pos[base[owner] + (self.da * Ne + self.db)[k]], indptr),
+                               shape=(idx.size, idx.size + n_prev + n_next))
+        # the halo plan: local contact points in the first and last w rows, and where theirs go
+        self._first = int(np.searchsorted(idx, w * N))
+        self._last = int(idx.size - np.searchsorted(idx, (n - w) * N))
+        self._x = np.empty(idx.size + n_prev + n_next)
+        self._n = idx.size
+        self._n_prev = n_prev
+
+    def apply(self, x):
+        """The edge term (float64, C-vector) of the C-vector ``x`` (any float dtype); None without one."""
+        if self.S is None:
+            return None
+        xe, n = self._x, self._n
+        xe[:n] = x
+        self._halo(xe[:self._first], xe[n - self._last:n], xe[n:n + self._n_prev], xe[n + self._n_prev:])
+        return self.S @ xe
