@@ -124,6 +124,7 @@ class EdgeCorrection:
         if not self.usable:
             self.S = None
             return
+        self._kernel_table()       # collective: here on every rank, not only on those with new masks
         w, N = self.w, self.fft.N
         n = act.shape[0]
         side = 2 * w + 1
