@@ -152,7 +152,8 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0, edge_window=0))   # today's step, float64
+    # #15's step: m_CC alone (no edge term), float64
+    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0, edge_window=0))
     r = y = None
     try:
         t0 = fft.transforms

@@ -147,7 +147,8 @@ class EdgeCorrection:
         kind = np.int32 if side * side < 31 else np.int64
         codes = np.zeros(edge.size, dtype=kind)
         flat = ext.ravel()
-        for k, off in enumerate(self.da * Ne + self.db):
+        offsets = self.da * Ne + self.db                    # the window's points in the padded grid
+        for k, off in enumerate(offsets):
             codes |= np.left_shift(flat[base + off], k, dtype=kind)
         # positions in the extended C-vector: local C, then the halo rows' contact points (row-major)
         pos = np.full(ext.shape, -1, dtype=np.int32)
@@ -174,7 +175,7 @@ class EdgeCorrection:
         owner = np.repeat(np.arange(edge.size), count)
         src = np.arange(indptr[-1]) - np.repeat(indptr[pos[base]] - first[which], count)
         k = np.nonzero(keep)[1][src]
-        self.S = sp.csr_matrix((vals[keep][src], pos[base[owner] + (self.da * Ne + self.db)[k]], indptr),
+        self.S = sp.csr_matrix((vals[keep][src], pos[base[owner] + offsets[k]], indptr),
                                shape=(idx.size, idx.size + n_prev + n_next))
         # the halo plan: local contact points in the first and last w rows, and where theirs go
         self._first = int(np.searchsorted(idx, w * N))

@@ -94,9 +94,9 @@ class StepPolicy:
     def record_iterations(self, iterations):
         """Krylov iterations of the latest step.  A changing free-set step that used the whole of a cap
         of at least ``cycle_cap`` (SolverSettings.cycle_cap of the grid's stiffness range: a tightened
-        cap, or the first one at high range) announces long solves, where the plain GMRES basis costs more orthogonalisation than the extra
-        iterations of FGMRES over GMRES(free_cycle) cycles: ``cycling`` turns on for the rest of the
-        solve.  Solves whose steps stay under the first caps (slow sliding) keep plain GMRES, where the
+        cap, or the first one at high range) announces long solves, where the plain GMRES basis costs
+        more orthogonalisation than the extra iterations of FGMRES over GMRES(free_cycle) cycles:
+        ``cycling`` turns on for the rest of the solve.  Solves whose steps stay under the first caps (slow sliding) keep plain GMRES, where the
         cycles lose [RESULTS.md]."""
         s = self.settings
         if self._last is None or s.free_cycle == 0:
