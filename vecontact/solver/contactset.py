@@ -27,7 +27,8 @@ directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pair
 wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).
 
 Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), and one pair per grid and
-solve for the edge correction's kernel.
+solve for the edge correction's kernel.  The pressure of the next iterate needs no pair: m x = s is
+known (NewtonState.advance).
 The inner KSP has the options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning,
 so its residual norm is the gap error on C in units of h_rms; restart SolverSettings.inner_restart).
 """
@@ -61,6 +62,7 @@ class ContactSetStep(SubsetStep):
         self.free = np.zeros(self.shape, dtype=bool)   # the free set F
         w = settings.edge_window
         self.edge = EdgeCorrection(op, w, settings.edge_drop) if w > 0 else None
+        self.advance = None     # called (x, s) after each Newton update: NewtonState.advance (snes.py)
 
     # ------------------------------------------------------------------ SubsetStep hooks
     def defaults(self, n_loc):
@@ -88,7 +90,7 @@ class ContactSetStep(SubsetStep):
 
     def release(self):
         super().release()
-        self.edge = None
+        self.edge = self.advance = None
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
@@ -122,11 +124,14 @@ class ContactSetStep(SubsetStep):
         b -= self.mean_C(b)
         self._r = r
         self.solve()
-        self.update(self._y, xo)
+        s = self.update(self._y, xo)
+        if self.advance is not None:
+            self.advance(xo, s)
 
     def update(self, y, xo):
         """The whole-grid Newton update ``xo`` (local rows) of the inner solution ``y`` (a Vec on C) for
-        the right-hand side of the running apply (one FFT pair): x = c s + e, s = s~ + y on C."""
+        the right-hand side of the running apply (one FFT pair): x = c s + e, s = s~ + y on C.  Returns
+        s = m x, the pressure increment (a work array, valid until the next update)."""
         idx = self.idx
         s = self.work.s                                   # the pressure increment
         np.copyto(s, self.w)
@@ -136,6 +141,7 @@ class ContactSetStep(SubsetStep):
         # small gap error on C instead of turning into pressures (m rho) on F that upset the set
         e = self.mean_C(np.take(self._r.ravel(), idx) - np.take(xo.ravel(), idx))
         xo += e
+        return s
 
 
 def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):

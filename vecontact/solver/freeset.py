@@ -119,6 +119,8 @@ class FreeSetStep(SubsetStep):
 
     def update(self, y, xo):
         """The whole-grid Newton update ``xo`` (local rows) of the inner solution ``y`` (a Vec on F) for
-        the right-hand side of the running apply: x_C = r_C, x_F = y.  No FFT."""
+        the right-hand side of the running apply: x_C = r_C, x_F = y.  No FFT.  Returns None: the
+        pressure increment m x is not known without a pair (contactset.py's returns it)."""
         np.copyto(xo, self._r)
         xo.reshape(-1)[self.idx] = y.getArray(readonly=True)
+        return None

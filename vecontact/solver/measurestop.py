@@ -5,7 +5,8 @@ tolerance, atol = tol / kappa on the 2-norm of the step's residual, bounds the m
 measure (operator.py) from above, often by far: the solve would run on after its update already
 converged.  This KSP convergence test, run after PETSc's default one, builds the update of the
 current Krylov iterate from time to time, evaluates the measure of the next Newton iterate g - x
-(one FFT pair, plus what building the update costs) and stops the solve when it is <= tol.  The next
+(one FFT pair, plus what building the update costs; on the contact set the update's pair gives the
+pressure too) and stops the solve when it is <= tol.  The next
 iterate is then kept, so the SNES's residual evaluation of it costs nothing.
 
 When to look: with the set unchanged, the measure of the next iterate is about kappa ||r||_inf of the
@@ -25,8 +26,8 @@ class MeasureStop:
     """KSP convergence test of exact Newton steps (``attach`` it to each step's inner KSP once; ``arm`` it
     before an exact step, ``disarm`` it before the others).  ``trace``: (Krylov iterations of the step
     so far, counted as subset.py does, ||r||_2, measure of the trial iterate) of every look.  A look
-    costs one FFT pair, and building the update may cost one more (freeset.py / contactset.py
-    ``update``, GMRES's right preconditioner)."""
+    costs one FFT pair: the trial's pressure on the free set (freeset.py), the update on the contact
+    set, whose pressure increment is then known (contactset.py ``update``)."""
 
     def __init__(self, state, tol, PETSc):
         self.state = state
@@ -72,9 +73,13 @@ class MeasureStop:
             self._y = step._y.duplicate()
             self._of = step._y
         ksp.buildSolution(self._y)
-        step.update(self._y, self._g)          # x, then g - x in place
+        ds = step.update(self._y, self._g)     # x, then g - x in place
         np.subtract(st.g, self._g, out=self._g)
-        st.op.pressure(self._g, self._p)
+        if ds is None:
+            st.op.pressure(self._g, self._p)
+        else:                                  # m x = ds known (contactset.py): p - (ds - mean ds)
+            np.subtract(st.p, ds, out=self._p)
+            self._p += st.fft.mean(ds)
         meas = max(st.op.measures(self._g, self._p))
         self.trace.append((int(its) * step.cycle, float(rnorm), float(meas)))
         self._rho = meas / scale if scale > 0 else None

@@ -15,7 +15,9 @@ class NewtonState:
     """Iterate g^, cached pressure p^(g^) and active set of the ContactOperator ``op`` (local rows).
 
     ``ensure(g)`` makes (g, p) the pressure of the iterate g (one FFT pair when g is new);
-    ``update_active_set()`` moves to the active set of the current iterate and counts its changes.
+    ``update_active_set()`` moves to the active set of the current iterate and counts its changes;
+    ``advance(x, s)`` moves to the Newton iterate g - x of a step whose pressure increment m x = s is
+    known (contact-set steps), so that its residual costs no FFT pair.
     """
 
     def __init__(self, op):
@@ -28,6 +30,7 @@ class NewtonState:
         self.g = self.fft.real_array()     # the iterate whose pressure is cached
         self.p = self.fft.real_array()     # p^(g)
         self.valid = False                 # False until the first ensure()
+        self.at_base = False               # (g, p) is the iterate of the current Jacobian (advance)
         self.act = np.zeros(self.shape, dtype=bool)
         self.nact = 0                      # points in act, all ranks
         self.updates = 0                   # update_active_set calls so far
@@ -43,12 +46,28 @@ class NewtonState:
         np.copyto(self.g, g)
         self.op.pressure(self.g, self.p)
         self.valid = True
+        self.at_base = False
 
     def keep(self, g, p):
         """Make (g, p) the cached iterate: ``p`` is p^(g), computed elsewhere (measurestop.py)."""
         np.copyto(self.g, g)
         np.copyto(self.p, p)
         self.valid = True
+        self.at_base = False
+
+    def advance(self, x, s):
+        """Move the cached iterate from the current Jacobian's g to the Newton iterate g - x (what the
+        SNES's full step makes next), its pressure to p - (s - mean s).  ``s`` must be m x up to
+        rounding (contactset.py: x = c s + a rigid shift); its mean is removed because m has no q = 0
+        mode.  Nothing if the iterate already moved (keep, or a second call): the next ensure() then
+        computes the pressure.  Collective (the mean)."""
+        if not (self.valid and self.at_base):
+            return
+        mean = self.fft.mean(s)
+        self.g -= x
+        self.p -= s
+        self.p += mean
+        self.at_base = False
 
     def update_active_set(self):
         """C = {p^ >= kappa g^} of the current iterate (never empty: mean p^ = 1 > 0, so the most
@@ -65,6 +84,7 @@ class NewtonState:
                 act.flat[int(np.argmax(val))] = True
             nact = 1
         change = -1 if self.updates == 0 else comm.allreduce(int(np.count_nonzero(act != self.act)), op=MPI.SUM)
+        self.at_base = True
         self.act = act
         self.nact = nact
         self.updates += 1

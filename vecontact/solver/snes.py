@@ -259,6 +259,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
         work = Workspace(fft)            # both step types' whole-grid arrays, held once
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))
+        steps["contact"].advance = state.advance      # its residual without an FFT pair
         stop = None
         if policy.own and settings.measure_stop == "on":
             stop = MeasureStop(state, tol, PETSc)
