@@ -136,3 +136,23 @@ def test_edge_correction_cuts_the_inner_iterations(area, v):
     (deterministic counts: FGMRES from zero on the same right-hand side)."""
     with_edge, without = _inner_iterations(2, area, v), _inner_iterations(0, area, v)
     assert with_edge < without, (with_edge, without)
+
+
+def test_an_unchanged_set_keeps_its_term():
+    """The exact Newton steps hand build() the last step's set again: S stands (the same object, no
+    rebuild).  Any other set is built afresh: one point changed gives the term of a fresh
+    EdgeCorrection on that set, and going back gives the first set's term again."""
+    mod, h, op, act = _case()
+    ec = EdgeCorrection(op, 2, 0.2)
+    ec.build(act, np.flatnonzero(act.ravel()))
+    S = ec.S
+    ec.build(act.copy(), np.flatnonzero(act.ravel()))
+    assert ec.S is S
+    changed = act.copy()
+    changed.flat[np.flatnonzero(~act.ravel())[0]] = True
+    for a in (changed, act):
+        ec.build(a, np.flatnonzero(a.ravel()))
+        fresh = EdgeCorrection(op, 2, 0.2)
+        fresh.build(a, np.flatnonzero(a.ravel()))
+        assert ec.S is not S and ec.S.shape == fresh.S.shape
+        assert (ec.S != fresh.S).nnz == 0

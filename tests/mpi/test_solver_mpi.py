@@ -268,3 +268,34 @@ def test_edge_term_collective(comm, where):
     if where == "patches":
         assert act[:2].any() and act[-2:].any() and act[N // 2 - 2:N // 2 + 2].any()     # halos hold contact
     assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0
+
+
+def test_edge_term_rebuilt_when_one_rank_changes(comm):
+    """A set that changes in one slab only, next to the other: every rank builds again (the halo
+    rows changed for the neighbour too; a rank that kept its S would also leave the other waiting in
+    the halo exchange), and each rank's term is its rows of the one-rank term (rtol 1e-12)."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.edge import EdgeCorrection
+    from vecontact.solver.operator import ContactOperator
+    N = 32
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=9)
+    act = h > np.quantile(h, 0.7)
+    x = np.random.default_rng(3).standard_normal(N * N)
+    terms, slabs = [], []
+    for c in (comm, comm.Split(comm.rank, 0)):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        rows = slice(fft.row_start, fft.row_stop)
+        slabs.append(rows)
+        ec = EdgeCorrection(ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows]), 2, 0.2)
+        changed = act.copy()
+        last = N // comm.size - 1                       # the first slab's last row, in the 2-rank split
+        changed[last, np.flatnonzero(~act[last])[:3]] = True
+        for a in (act, changed):
+            ec.build(a[rows], np.flatnonzero(a[rows].ravel()))
+        idx = np.flatnonzero(changed[rows].ravel())
+        terms.append(ec.apply(x[fft.row_start * N:fft.row_stop * N][idx]))
+    two, one = terms
+    full = np.zeros((N, N))
+    full[changed] = one
+    ref = full[slabs[0]][changed[slabs[0]]]
+    assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0

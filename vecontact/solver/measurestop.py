@@ -27,7 +27,8 @@ class MeasureStop:
     before an exact step, ``disarm`` it before the others).  ``trace``: (Krylov iterations of the step
     so far, counted as subset.py does, ||r||_2, measure of the trial iterate) of every look.  A look
     costs one FFT pair: the trial's pressure on the free set (freeset.py), the update on the contact
-    set, whose pressure increment is then known (contactset.py ``update``)."""
+    set, whose pressure increment is then known (contactset.py ``update``); building the Krylov solution
+    may cost one more (GMRES's right preconditioner)."""
 
     def __init__(self, state, tol, PETSc):
         self.state = state
