@@ -78,9 +78,8 @@ class MeasureStop:
         np.subtract(st.g, self._g, out=self._g)
         if ds is None:
             st.op.pressure(self._g, self._p)
-        else:                                  # m x = ds known (contactset.py): p - (ds - mean ds)
-            np.subtract(st.p, ds, out=self._p)
-            self._p += st.fft.mean(ds)
+        else:                                  # m x = ds known (contactset.py)
+            st.pressure_after(ds, self._p)
         meas = max(st.op.measures(self._g, self._p))
         self.trace.append((int(its) * step.cycle, float(rnorm), float(meas)))
         self._rho = meas / scale if scale > 0 else None

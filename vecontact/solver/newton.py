@@ -63,11 +63,17 @@ class NewtonState:
         computes the pressure.  Collective (the mean)."""
         if not (self.valid and self.at_base):
             return
-        mean = self.fft.mean(s)
+        self.pressure_after(s, self.p)
         self.g -= x
-        self.p -= s
-        self.p += mean
         self.at_base = False
+
+    def pressure_after(self, s, out):
+        """``out`` = p - (s - mean s), the pressure of the iterate g - x when m x = s (``out`` may be
+        self.p).  Collective (the mean)."""
+        mean = self.fft.mean(s)
+        np.subtract(self.p, s, out=out)
+        out += mean
+        return out
 
     def update_active_set(self):
         """C = {p^ >= kappa g^} of the current iterate (never empty: mean p^ = 1 > 0, so the most
