@@ -233,6 +233,30 @@ def test_single_steps_collective(comm, sigma0, mode, options):
     assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
 
 
+def _edge_terms(comm, h, sets, x):
+    """The edge term (edge.py, w = 2, drop 0.2) of ``x`` on the last of ``sets`` (whole-grid bool
+    arrays, built one after the other by one EdgeCorrection), on ``comm`` and on this rank alone:
+    (this rank's term on ``comm``, its rows of the one-rank term, the one-rank term)."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.edge import EdgeCorrection
+    from vecontact.solver.operator import ContactOperator
+    N = h.shape[0]
+    terms, slabs = [], []
+    for c in (comm, comm.Split(comm.rank, 0)):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        rows = slice(fft.row_start, fft.row_stop)
+        slabs.append(rows)
+        ec = EdgeCorrection(ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows]), 2, 0.2)
+        for a in sets:
+            ec.build(a[rows], np.flatnonzero(a[rows].ravel()))
+        idx = np.flatnonzero(sets[-1][rows].ravel())
+        terms.append(ec.apply(x[fft.row_start * N:fft.row_stop * N][idx]))
+    two, one = terms
+    full = np.zeros((N, N))
+    full[sets[-1]] = one
+    return two, full[slabs[0]][sets[-1][slabs[0]]], one
+
+
 @pytest.mark.parametrize("where", ["patches", "one slab"])
 def test_edge_term_collective(comm, where):
     """The edge correction of the contact-set preconditioner (edge.py) on 2 ranks: the halo rows of the
@@ -240,31 +264,14 @@ def test_edge_term_collective(comm, where):
     its rows of the one-rank term, to FFT rounding of the kernel (rtol 1e-12 of the term's largest
     entry).  "one slab": contact in the first rank's rows only, so the other has no edge point and no
     mask to solve, and must still join the kernel's collective FFT pair (it once waited alone)."""
-    from vecontact.core.pfft import SlabFFT
-    from vecontact.solver.edge import EdgeCorrection
-    from vecontact.solver.operator import ContactOperator
-    N, w = 32, 2
+    N = 32
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=9)
     act = h > np.quantile(h, 0.7)
     if where == "one slab":
         act[N // comm.size - 1:] = False
         act[0] = False
     x = np.random.default_rng(3).standard_normal(N * N)
-    terms, slabs = [], []
-    for c in (comm, comm.Split(comm.rank, 0)):
-        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
-        rows = slice(fft.row_start, fft.row_stop)
-        slabs.append(rows)
-        op = ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows])
-        a = act[rows]
-        idx = np.flatnonzero(a.ravel())
-        ec = EdgeCorrection(op, w, 0.2)
-        ec.build(a, idx)
-        terms.append(ec.apply(x[fft.row_start * N:fft.row_stop * N][idx]))
-    two, one = terms
-    full = np.zeros((N, N))
-    full[act] = one
-    ref = full[slabs[0]][act[slabs[0]]]
+    two, ref, one = _edge_terms(comm, h, [act], x)
     if where == "patches":
         assert act[:2].any() and act[-2:].any() and act[N // 2 - 2:N // 2 + 2].any()     # halos hold contact
     assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0
@@ -274,28 +281,12 @@ def test_edge_term_rebuilt_when_one_rank_changes(comm):
     """A set that changes in one slab only, next to the other: every rank builds again (the halo
     rows changed for the neighbour too; a rank that kept its S would also leave the other waiting in
     the halo exchange), and each rank's term is its rows of the one-rank term (rtol 1e-12)."""
-    from vecontact.core.pfft import SlabFFT
-    from vecontact.solver.edge import EdgeCorrection
-    from vecontact.solver.operator import ContactOperator
     N = 32
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=9)
     act = h > np.quantile(h, 0.7)
+    changed = act.copy()
+    last = N // comm.size - 1                           # the first slab's last row, in the 2-rank split
+    changed[last, np.flatnonzero(~act[last])[:3]] = True
     x = np.random.default_rng(3).standard_normal(N * N)
-    terms, slabs = [], []
-    for c in (comm, comm.Split(comm.rank, 0)):
-        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
-        rows = slice(fft.row_start, fft.row_stop)
-        slabs.append(rows)
-        ec = EdgeCorrection(ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows]), 2, 0.2)
-        changed = act.copy()
-        last = N // comm.size - 1                       # the first slab's last row, in the 2-rank split
-        changed[last, np.flatnonzero(~act[last])[:3]] = True
-        for a in (act, changed):
-            ec.build(a[rows], np.flatnonzero(a[rows].ravel()))
-        idx = np.flatnonzero(changed[rows].ravel())
-        terms.append(ec.apply(x[fft.row_start * N:fft.row_stop * N][idx]))
-    two, one = terms
-    full = np.zeros((N, N))
-    full[changed] = one
-    ref = full[slabs[0]][changed[slabs[0]]]
+    two, ref, one = _edge_terms(comm, h, [act, changed], x)
     assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0
