@@ -77,6 +77,29 @@ def test_edge_rows_are_the_local_inverses(w, drop):
             assert abs(got[j] - want[j]) <= 1e-9 * scale, (i, j, got[j], want[j])
 
 
+@pytest.mark.parametrize("w", [1, 2, 3])
+def test_mask_rows_by_either_system(w):
+    """Each window mask's row is solved on its contact points (few in contact) or through the Schur
+    complement on its free points (many): both against the row of one direct K x K solve of c on the
+    window's contact points (identity on its free ones), for masks of every contact count (1e-11 of
+    the row's largest entry: K <= 49 and c_W well conditioned, so the two eliminations differ by
+    rounding only)."""
+    mod, h, op, act = _case()
+    ec = EdgeCorrection(op, w, 0.0)
+    cW, M = ec._kernel_table()
+    K = cW.shape[0]
+    rng = np.random.default_rng(5)
+    mask = np.zeros((3 * (K - 1), K), dtype=bool)
+    for i, p in enumerate(np.repeat(np.arange(1, K), 3)):   # p contact points, the centre one of them
+        others = rng.choice(np.delete(np.arange(K), K // 2), p - 1, replace=False)
+        mask[i, np.append(others, K // 2)] = True
+    got = ec._solve_masks(mask)
+    for m, row in zip(mask, got):
+        A = np.where(np.outer(m, m), cW.T, 0.0) + np.diag(~m)
+        want = (np.linalg.solve(A, np.eye(K)[K // 2]) - M[K // 2]) * m
+        assert np.abs(row - want).max() <= 1e-11 * np.abs(want).max(), (m.sum(), row, want)
+
+
 def test_edge_term_of_a_float32_vector():
     """A float32 C-vector (the float32 preconditioner's input) gives the term of its float64 value."""
     mod, h, op, act = _case()

@@ -15,8 +15,9 @@ centred on i:
 the local inverse of the compliance on the window's contact points minus that on the whole window
 (whose own edges m does not have).  Away from the edges both inverses are the same and the term
 vanishes.  The windows' inverses depend only on which window points are in contact (a mask of
-(2w+1)^2 bits), so one small dense solve is made per mask and grid, and reused by every later Newton
-step on that grid.  Applying the term is one sparse product on C (no FFT pair) and, on several ranks,
+(2w+1)^2 bits), so one small dense solve is made per mask and grid (on the window's contact points or,
+when they are the majority, on its free points through a Schur complement), and reused by every later
+Newton step on that grid.  Applying the term is one sparse product on C (no FFT pair) and, on several ranks,
 an exchange of the contact values in w rows with each neighbouring slab; the set-up costs one FFT
 pair per grid (the compliance's kernel c(x)).
 
@@ -62,7 +63,7 @@ class EdgeCorrection:
 
     # ------------------------------------------------------------------ set-up
     def _kernel_table(self):
-        """c_W (K x K, c(x_a - x_b) over the window's points) and the centre row of its inverse.  One FFT
+        """c_W (K x K, c(x_a - x_b) over the window's points) and its inverse.  One FFT
         pair: the compliance's response to a unit pressure at the origin, its values at the offsets
         |d| <= 2w gathered to every rank."""
         if self._base is None:
@@ -79,7 +80,7 @@ class EdgeCorrection:
                     table[i] = kern[r - fft.row_start, off % N]
             self.comm.Allreduce(MPI.IN_PLACE, table, op=MPI.SUM)
             cW = table[(self.da[:, None] - self.da[None, :]) + 2 * w, (self.db[:, None] - self.db[None, :]) + 2 * w]
-            self._base = (cW, np.linalg.inv(cW)[cW.shape[0] // 2])
+            self._base = (cW, np.linalg.inv(cW))
         return self._base
 
     def _correction_rows(self, codes):
@@ -88,17 +89,9 @@ class EdgeCorrection:
         known = self._codes
         new = codes[~np.isin(codes, known)] if known.size else codes
         if new.size:
-            cW, full = self._kernel_table()
-            K = cW.shape[0]
+            K = self.da.size
             mask = ((new[:, None] >> np.arange(K)) & 1).astype(bool)
-            # the transpose of c on the window's contact points, identity on its free ones
-            At = np.where(mask[:, :, None] & mask[:, None, :], cW.T[None], 0.0)
-            diag = np.arange(K)
-            At[:, diag, diag] = np.where(mask, At[:, diag, diag], 1.0)
-            e = np.zeros((new.size, K, 1))
-            e[:, K // 2, 0] = 1.0
-            rows = np.linalg.solve(At, e)[..., 0]                # row K//2 of the inverse
-            rows = (rows - full[None, :]) * mask
+            rows = self._solve_masks(mask)
             # the small entries cost products and save no iterations [RESULTS.md]
             big = np.abs(rows).max(axis=1, keepdims=True)
             rows[np.abs(rows) < self.drop * big] = 0.0
@@ -107,6 +100,30 @@ class EdgeCorrection:
             self._codes = allc[order]
             self._rows = np.concatenate([self._rows, rows])[order]
         return self._rows[np.searchsorted(self._codes, codes)]
+
+    def _solve_masks(self, mask):
+        """The correction rows of the window masks ``mask`` (n x K bool, the centre in contact), before
+        the drop: the centre row of inv(c on the window's contact points C) minus that of M = inv(c_W),
+        on C (zero on the free points F).  Each mask is solved in the smaller of two systems with the
+        same answer: c_CC^T x = e_centre on its p contact points, or, through the Schur complement
+        inv(c_CC) = M_CC - M_CF inv(M_FF) M_FC, the row -z^T M_FC with M_FF^T z = M_cF^T on its K - p
+        free points (an edge point has at least one).  Masks of one p are solved together."""
+        cW, M = self._kernel_table()
+        K = cW.shape[0]
+        centre = K // 2
+        rows = np.zeros(mask.shape)
+        p = mask.sum(axis=1)
+        for size in np.unique(p):
+            g = np.flatnonzero(p == size)
+            C = np.nonzero(mask[g])[1].reshape(g.size, size)        # each mask's contact points, sorted
+            if size <= K - size:
+                x = np.linalg.solve(cW.T[C[:, :, None], C[:, None, :]], (C == centre)[..., None].astype(float))
+                rows[g[:, None], C] = x[..., 0] - M[centre][C]
+            else:
+                F = np.nonzero(~mask[g])[1].reshape(g.size, K - size)
+                z = np.linalg.solve(M.T[F[:, :, None], F[:, None, :]], M[centre][F][..., None])
+                rows[g[:, None], C] = -np.einsum("nf,nfc->nc", z[..., 0], M[F[:, :, None], C[:, None, :]])
+        return rows
 
     def _halo(self, send_prev, send_next, recv_prev, recv_next):
         """recv_prev = the previous slab's send_next, recv_next = the next slab's send_prev (periodic)."""
@@ -142,23 +159,24 @@ class EdgeCorrection:
         self._halo(rows[w:2 * w], rows[n:n + w], rows[:w], rows[n + w:])
         ext = np.concatenate([rows[:, N - w:], rows, rows[:, :w]], axis=1)   # + w columns each side
         Ne = N + 2 * w
-        # the edge points: contact points whose window is not all in contact (separable erosion)
-        cols = ext[:, :N].copy()
+        # each point's row of its window as side bits (bit b: column offset b - w; side <= 7: uint8)
+        rc = ext[:, :N].copy()
         for b in range(1, side):
-            cols &= ext[:, b:b + N]
-        inner = cols[:n].copy()
+            rc |= ext[:, b:b + N] << b
+        # the edge points: contact points whose window is not all in contact
+        whole = (1 << side) - 1
+        inner = rc[:n] == whole
         for a in range(1, side):
-            inner &= cols[a:a + n]
+            inner &= rc[a:a + n] == whole
         edge = np.flatnonzero(act.ravel() > inner.ravel())
         ie, je = np.divmod(edge, N)
         base = (ie + w) * Ne + je + w                        # the edge points in the padded grid
         # each edge point's window mask as an integer, bit a*side + b for the offset (a - w, b - w)
         kind = np.int32 if side * side < 31 else np.int64
         codes = np.zeros(edge.size, dtype=kind)
-        flat = ext.ravel()
+        for a in range(side):
+            codes |= np.left_shift(rc[a:a + n].ravel()[edge], side * a, dtype=kind)
         offsets = self.da * Ne + self.db                    # the window's points in the padded grid
-        for k, off in enumerate(offsets):
-            codes |= np.left_shift(flat[base + off], k, dtype=kind)
         # positions in the extended C-vector: local C, then the halo rows' contact points (row-major)
         pos = np.full(ext.shape, -1, dtype=np.int32)
         core = pos[:, w:w + N]
@@ -177,16 +195,19 @@ class EdgeCorrection:
         keep = vals != 0.0
         per_mask = keep.sum(axis=1)
         first = np.cumsum(per_mask) - per_mask
+        at_kind = np.int32 if ext.size < 2 ** 31 else np.int64
+        kept_off = offsets.astype(at_kind)[np.nonzero(keep)[1]]   # every mask's kept entries, in order
         which = np.searchsorted(uniq, codes)
         count = per_mask[which]
         indptr = np.zeros(idx.size + 1, dtype=np.int32)
-        indptr[pos[base] + 1] = count
+        rows_at = pos[base]                                   # the edge points' rows of S
+        indptr[rows_at + 1] = count
         np.cumsum(indptr, out=indptr)         # int32: S has far fewer than 2**31 entries on a rank
-        owner = np.repeat(np.arange(edge.size), count)
-        src = np.arange(indptr[-1]) - np.repeat(indptr[pos[base]] - first[which], count)
-        k = np.nonzero(keep)[1][src]
-        self.S = sp.csr_matrix((vals[keep][src], pos[base[owner] + offsets[k]], indptr),
-                               shape=(idx.size, idx.size + n_prev + n_next))
+        # entry j of S: kept entry src[j] (of its row's mask), at its row's point plus the entry's offset
+        src = np.arange(indptr[-1], dtype=np.int32) - np.repeat(indptr[rows_at] - first[which], count)
+        at = np.repeat(base.astype(at_kind), count)
+        at += kept_off[src]
+        self.S = sp.csr_matrix((vals[keep][src], pos[at], indptr), shape=(idx.size, idx.size + n_prev + n_next))
         # the halo plan: local contact points in the first and last w rows, and where theirs go
         self._first = int(np.searchsorted(idx, w * N))
         self._last = int(idx.size - np.searchsorted(idx, (n - w) * N))
