@@ -2,6 +2,7 @@
 import json
 import os
 import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -92,3 +93,45 @@ def test_test_command_runs_every_stage_and_fails_if_any_fails():
     assert proc.returncode == 1, proc.stderr
     assert "MPI tests on 2 ranks" in proc.stderr
     assert "FAILED: serial tests (exit 5) MPI tests (exit 5)" in proc.stderr   # 5: no tests collected
+
+
+def _build_fftw(cache, url):
+    """Run ./run's build_fftw alone (its text cut from the script), into ``cache``, fetching ``url``."""
+    text = open(RUN).read()
+    body = text[text.index("\nbuild_fftw() {") + 1:]
+    body = body[:body.index("\n}\n") + 3]
+    script = "\n".join([
+        "set -euo pipefail",
+        "die() { printf 'run: error: %s\\n' \"$*\" >&2; exit 1; }",
+        "say() { :; }",
+        f"PY={sys.executable}; FFTW_CACHE={cache}; FFTW_URL={url}",
+        "FFTW_VERSION=3.3.10; FFTW_SHA256=" + "0" * 64 + "; FFTW_SIMD=",
+        body,
+        "build_fftw",
+    ])
+    return subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60)
+
+
+def test_failed_fftw_fetch_leaves_no_build_folder(tmp_path):
+    """A build that cannot fetch FFTW stops with one line naming the URL and the reason, and leaves no
+    build folder; it also removes the folders an earlier failed or killed build left (their logs)."""
+    stale = tmp_path / "fftw-x.build.AbC123"
+    stale.mkdir()
+    (stale / "build.log").write_text("an earlier attempt")
+    url = (tmp_path / "missing.tar.gz").as_uri()
+    proc = _build_fftw(tmp_path / "fftw-x", url)
+    assert proc.returncode == 1, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"run: error: could not download {url}: ")
+    assert "No such file" in lines[0] and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fftw-x.lock"]
+
+
+def test_fftw_with_a_wrong_checksum_leaves_no_build_folder(tmp_path):
+    """A fetched archive whose sha256 is not FFTW's is refused, and its folder removed."""
+    bad = tmp_path / "fftw.tar.gz"
+    bad.write_bytes(b"not fftw")
+    proc = _build_fftw(tmp_path / "fftw-x", bad.as_uri())
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [f"run: error: {bad.as_uri()}: wrong sha256"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fftw-x.lock", "fftw.tar.gz"]
