@@ -1,11 +1,13 @@
 """The ./run launcher: -n starts mpiexec, inside an MPI launch it does not start another one."""
 import json
 import os
+import shutil
 import subprocess
 import sys
 
 import h5py
 import numpy as np
+import pytest
 import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -112,6 +114,10 @@ def _build_fftw(cache, url):
     return subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60)
 
 
+_NO_MAKE = pytest.mark.skipif(shutil.which("make") is None, reason="build_fftw stops earlier without make")
+
+
+@_NO_MAKE
 def test_failed_fftw_fetch_leaves_no_build_folder(tmp_path):
     """A build that cannot fetch FFTW stops with one line naming the URL and the reason, and leaves no
     build folder; it also removes the folders an earlier failed or killed build left (their logs)."""
@@ -127,6 +133,7 @@ def test_failed_fftw_fetch_leaves_no_build_folder(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fftw-x.lock"]
 
 
+@_NO_MAKE
 def test_fftw_with_a_wrong_checksum_leaves_no_build_folder(tmp_path):
     """A fetched archive whose sha256 is not FFTW's is refused, and its folder removed."""
     bad = tmp_path / "fftw.tar.gz"
