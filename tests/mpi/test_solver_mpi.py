@@ -130,7 +130,8 @@ def test_solver_state_is_freed_collective(comm):
 def test_measure_stop_collective(comm, N, v, sigma0):
     """The measure stop of exact steps (measurestop.py) on 2 ranks, on the free set (256^2, A/A0 ~ 0.58)
     and on the contact set (512^2, ~ 0.29; at 4.5e4 the edge-corrected steps converge before an exact
-    step looks): its looks are collective (a trial iterate's pressure and
+    step looks, and so does an exact step started from the carried directions: carry.py off here): its
+    looks are collective (a trial iterate's pressure and
     measure, the vectors of the step's current set) and give the same stop on every rank; the answer
     is one rank's to the solver's tolerance (A/A0 to a few contact-line points, mu to 1e-6)."""
     from vecontact.core.pfft import SlabFFT
@@ -143,7 +144,8 @@ def test_measure_stop_collective(comm, N, v, sigma0):
     for c in (comm, comm.Split(comm.rank, 0)):
         fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
         h = generate(fft, L_PAPER, psd, 1)
-        out.append(solve_contact(fft, L_PAPER, h, hn(), v, sigma0, tolerance=tol, store=()))
+        out.append(solve_contact(fft, L_PAPER, h, hn(), v, sigma0, tolerance=tol, store=(),
+                                 petsc_options={"vc_carry_directions": "0"}))
     res, one = out
     same_on_all_ranks(comm, res)
     looks = res.diagnostics["measure_checks"]
@@ -230,6 +232,31 @@ def test_single_steps_collective(comm, sigma0, mode, options):
     assert single > 0.3 * res.fft_pairs and none == 0
     assert res.diagnostics["step_modes"][-1][1] == mode
     assert res.converged and one.converged
+    assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
+
+
+def test_carried_directions_collective(comm):
+    """An exact contact-set step started from the last step's directions (carry.py) on 2 ranks: every
+    rank carries the same number of them (the count is collective), so the step's Krylov iterations are
+    one process; the answer is one rank's without them to the solver's tolerance."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.surface import generate
+    from vecontact.physics.spectrum import SelfAffine
+    from vecontact.solver import solve_contact
+    N, tol = 256, 1e-8
+    psd = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
+    out = []
+    for c, opts in ((comm, {}), (comm.Split(comm.rank, 0), {"vc_carry_directions": "0"})):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        h = generate(fft, L_PAPER, psd, 1)
+        out.append(solve_contact(fft, L_PAPER, h, hn(), 10.0, 1.0e5, tolerance=tol, store=(), petsc_options=opts))
+    res, one = out
+    same_on_all_ranks(comm, res)
+    mine = (res.diagnostics["carried_directions"], res.diagnostics["linear_history"])
+    assert comm.allgather(mine) == [mine] * comm.size
+    assert mine[0] > 0 and one.diagnostics["carried_directions"] == 0
+    assert res.diagnostics["step_modes"][-1][1] == "contact"
+    assert res.converged and one.converged and res.linear_iterations < one.linear_iterations
     assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
 
 

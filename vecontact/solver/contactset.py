@@ -22,9 +22,11 @@ correction, a sparse term from small dense inverses of c on windows (edge.py; So
 0: none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
 orthogonalisation costs little next to the FFTs.
 
-Each step starts its inner Krylov solve afresh.  Krylov recycling across the steps (GCRO with the
-directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pairs but cost 11-50 % more
-wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).
+A changing step starts its inner Krylov solve afresh.  Krylov recycling across the steps (GCRO with
+the directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pairs but cost 11-50 %
+more wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).  An exact step, whose set is the last
+step's, needs no map: its FGMRES starts from the last step's directions and their products, known
+without an FFT pair (carry.py, SolverSettings.carry_directions).
 
 Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), and one pair per grid and
 solve for the edge correction's kernel.  The pressure of the next iterate needs no pair: m x = s is

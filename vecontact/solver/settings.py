@@ -104,6 +104,9 @@ class SolverSettings:
                              "correction (edge.py; 0: none) [RESULTS.md]", lo=0, hi=3)
     edge_drop: float = _knob(0.2, "... its entries below this fraction of their row's largest are dropped [RESULTS.md]",
                              lo=0, hi=1)
+    carry_directions: int = _knob(30, "an exact contact-set step's FGMRES starts from this many of the last "
+                                  "step's directions (carry.py; 0: none) [RESULTS.md]", lo=0)
+    carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)

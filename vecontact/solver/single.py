@@ -67,6 +67,7 @@ class SingleGMRES:
         self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
         self.rescales = 0     # basis rows rescaled by a power of two (solve), over all solves
         self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
+        self.arnoldi = None   # (k, G) of the last cycle: A Z[j] = sum_i G[i, j] V[i] (flexible; carry.py)
 
     @staticmethod
     def sizes(n_loc, restart, flexible):
@@ -133,6 +134,7 @@ class SingleGMRES:
             np.multiply(r, 1.0 / beta, out=V[0], casting="same_kind")
             m = self.restart
             H = np.zeros((m + 1, m))
+            Hraw = np.zeros((m + 1, m)) if self.flexible else None   # H before the rotations
             cs, sn = np.zeros(m), np.zeros(m)
             g = np.zeros(m + 1)
             g[0] = beta
@@ -152,6 +154,8 @@ class SingleGMRES:
                 hn = tn / s[k]
                 H[:k + 1, k] = dv / (si * s[k])
                 H[k + 1, k] = hn
+                if Hraw is not None:
+                    Hraw[:k + 2, k] = H[:k + 2, k]
                 for i in range(k):                         # earlier Givens rotations
                     a0, a1 = H[i, k], H[i + 1, k]
                     H[i, k], H[i + 1, k] = cs[i] * a0 + sn[i] * a1, -sn[i] * a0 + cs[i] * a1
@@ -164,10 +168,10 @@ class SingleGMRES:
                 k += 1
                 its += 1
                 self.history.append(res)
+                s[k] = tn
                 done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
                 if done:
                     break
-                s[k] = tn
                 e = math.frexp(tn)[1]
                 if abs(e) > _RANGE:
                     t *= np.float32(math.ldexp(1.0, -e))
@@ -181,6 +185,10 @@ class SingleGMRES:
             if self.flexible and B is not None:
                 np.dot(y.astype(z.dtype), self.Z[:k], out=z)
                 x += z
+                # row i of V is s_i v_i, Z[j] = s_j B v_j and A B v_j = sum_i Hraw[i, j] v_i
+                # (a happy breakdown leaves row k zero: s_k = 0, and its G row stays 0)
+                ratio = np.divide(s[:k], s[:k + 1, None], out=np.zeros((k + 1, k)), where=s[:k + 1, None] > 0)
+                self.arnoldi = (k, Hraw[:k + 1, :k] * ratio)
             else:
                 t = V[k]
                 np.dot(y.astype(np.float32), V[:k], out=t)

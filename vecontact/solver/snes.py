@@ -117,6 +117,7 @@ class _Semismooth:
             self.mode = mode
             self.modes.append((len(self.lin_history) - 1, mode))
         step.set_active(st.act, st.nact)
+        step.carry(change == 0)
         if len(self.lin_history) >= 2:
             self.policy.record_iterations(self.lin_history[-1] - self.lin_history[-2])
         tolerances = self.policy.step(change, mode)
@@ -147,7 +148,8 @@ class _Semismooth:
                     measure_checks=self.stop.trace if self.stop is not None else [],
                     single_iterations=sum(s.single_iterations for s in self.steps.values()),
                     float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()),
-                    mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()))
+                    mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()),
+                    carried_directions=sum(s.carried_directions for s in self.steps.values()))
 
     def release(self):
         for step in self.steps.values():

@@ -13,6 +13,7 @@ from functools import cached_property
 import numpy as np
 from mpi4py import MPI
 
+from vecontact.solver.carry import CarriedDirections
 from vecontact.solver.single import SingleGMRES
 
 __all__ = ["Grid", "Mixed", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
@@ -152,10 +153,14 @@ class Restricted:
         self.matvec(x.getArray(readonly=True), y.getArray())
 
     def mult(self, mat, x, y):
-        self._apply(x, y)
+        carried = self.step.carried            # an exact step's first products: from memory (carry.py)
+        if carried is None or not carried.serve_product(y.getArray()):
+            self._apply(x, y)
 
     def apply(self, pc, x, y):
-        self._apply(x, y)
+        carried = self.step.carried            # ... its first preconditioned vectors: the carried ones
+        if carried is None or not carried.serve_direction(y.getArray()):
+            self._apply(x, y)
 
     def setUp(self, pc):
         pass
@@ -287,6 +292,7 @@ class SubsetStep:
         self.iterations = 0             # inner Krylov iterations of the ``solves`` applies
         self.single_iterations = 0      # ... of them with a float32 basis (single.py)
         self.mixed_pairs = 0            # pairs with one transform in float32 (Mixed)
+        self.carried_directions = 0     # directions exact solves started from (carry.py), no pair each
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
         self._A = self._b = self._y = self._A_ctx = None
@@ -297,9 +303,12 @@ class SubsetStep:
         self.ksp.setOptionsPrefix(inner_prefix)
         self._configured = False
         self._own_keys = []
+        self._carry_from = None         # the last single-precision FGMRES solve (carry.py), while it may carry
+        self.carried = None             # the directions the running PETSc solve starts from (carry.py)
 
     def activate(self, ksp):
         """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
+        self._carry_from = None         # the last solve of this step type was not the last Newton step's
         ksp.setType("preonly")
         ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
@@ -368,6 +377,12 @@ class SubsetStep:
             inner.setFromOptions()
             self.cycle = inner.getTolerances()[3]
 
+    def carry(self, unchanged):
+        """Whether the next solve may start from the directions of the last one (carry.py): only if
+        the active set is the one it solved on (``unchanged``; snes.py) and nothing ran in between."""
+        if not unchanged:
+            self._carry_from = None
+
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
         if self.single:
@@ -375,9 +390,29 @@ class SubsetStep:
         else:
             self._A_ctx.grid = self._krylov_grid()
             self._y.set(0.0)
-            self.ksp.solve(self._b, self._y)
-            self.iterations += self.cycle * self.ksp.getIterationNumber()
+            self.carried = self._carried_directions()
+            try:
+                self.ksp.solve(self._b, self._y)
+            finally:
+                served = self.carried.served if self.carried is not None else 0
+                self.carried = None
+                self.carried_directions += served
+            # the carried directions cost no FFT pair: they are not counted as iterations
+            self.iterations += self.cycle * self.ksp.getIterationNumber() - served
         self.solves += 1
+
+    def _carried_directions(self):
+        """CarriedDirections of the last solve (``carry``), or None; the last solve's memory is let
+        go of.  Collective: every rank carries the same number."""
+        gm, self._carry_from = self._carry_from, None
+        # float32 products, like a mixed operator's, hold a solve near 1e-7 of its start: only where
+        # the policy lets the operator round so (StepPolicy.mixed_reduction)
+        if gm is None or gm.arnoldi is None or self.cycle != 1 or not self.mixed:
+            return None
+        st = self.settings
+        count = CarriedDirections.count(self.idx.size, gm.Z.itemsize, st.carry_directions, st.carry_memory)
+        count = self.comm.allreduce(count, op=MPI.MIN)
+        return CarriedDirections(gm, count) if count > 0 else None
 
     def _krylov_grid(self):
         """Where the PETSc solve's operator forms its products: with ``mixed`` (set_tolerances) and
@@ -444,6 +479,7 @@ class SubsetStep:
         b, y = self._b.getArray(readonly=True), self._y.getArray()
         allsum = self.fft._allsum
         k = self.cycle
+        self._carry_from = None
         # float64 vectors' worth of memory an iteration: a float32 basis vector, and with FGMRES the
         # preconditioned one in the work precision
         fgmres_vectors = (4 + np.dtype(sg.work).itemsize) / 8
@@ -454,6 +490,8 @@ class SubsetStep:
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
             gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.mode == "contact")
             its, _ = gm.solve(sg.A.matvec, sg.B.matvec, b, y, rtol, atol, max_it)
+            if gm.flexible and self.settings.carry_directions > 0:
+                self._carry_from = gm           # its directions, should the next step be exact (carry.py)
         else:   # cycles (freeset.start_cycles): FGMRES over exactly k GMRES iterations, as the KSP does
             restart = self.settings.single_restart(n_loc, "free", fgmres_vectors, reserve=k + 3)
             restart = self.comm.allreduce(restart, op=MPI.MIN)
