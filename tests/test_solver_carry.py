@@ -13,6 +13,7 @@ import pytest
 from mpi4py import MPI
 
 from reference.cases import L_PAPER, NU, Q0
+from reference.krylov import allsum as _allsum, system as _system
 
 from vecontact.core.pfft import SlabFFT
 from vecontact.core.surface import generate
@@ -21,20 +22,6 @@ from vecontact.physics.spectrum import SelfAffine
 from vecontact.solver import solve_contact
 from vecontact.solver.carry import CarriedDirections
 from vecontact.solver.single import SingleGMRES
-
-
-def _allsum(values):
-    return np.asarray(values, dtype=np.float64).copy()
-
-
-def _system(n=200, seed=7, scale=1.0):
-    """A non-symmetric operator with a spread spectrum and an approximate inverse as preconditioner."""
-    rng = np.random.default_rng(seed)
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    lam = np.logspace(0, 2, n)
-    A = scale * ((Q * lam) @ Q.T + 3.0 * rng.standard_normal((n, n)) / np.sqrt(n))
-    B = np.linalg.inv((Q * lam) @ Q.T + 0.3 * np.eye(n) * lam.mean())
-    return A, B, rng.standard_normal(n)
 
 
 def _flexible_solve(A, B, b, restart, rtol, work=np.float64):
@@ -49,7 +36,7 @@ def _flexible_solve(A, B, b, restart, rtol, work=np.float64):
 def test_arnoldi_relation(restart, scale):
     """scale 2^40: the rows' lengths leave 2^+-32, so rows are rescaled (single._RANGE), which G must
     follow; restart 7: the relation is the last cycle's."""
-    A, B, b = _system(scale=scale)
+    A, B, b = _system(200, 7, scale)
     gm, its, _ = _flexible_solve(A, B, b, restart, 1e-5)
     k, G = gm.arnoldi
     assert k == (its - 1) % restart + 1 and G.shape == (k + 1, k)
@@ -68,7 +55,7 @@ def test_arnoldi_relation(restart, scale):
 
 
 def test_carried_directions_products_order_and_count():
-    A, B, b = _system(seed=11)
+    A, B, b = _system(200, 11)
     gm, its, _ = _flexible_solve(A, B, b, 100, 1e-4, work=np.float32)
     k = gm.arnoldi[0]
     carried = CarriedDirections(gm, 5)

@@ -14,6 +14,7 @@ import pytest
 from mpi4py import MPI
 
 from reference.cases import L_PAPER, NU, Q0
+from reference.krylov import allsum as _allsum, system as _system
 
 from vecontact.core.pfft import SlabFFT
 from vecontact.core.surface import generate
@@ -21,23 +22,6 @@ from vecontact.physics.modulus import HavriliakNegami
 from vecontact.physics.spectrum import SelfAffine
 from vecontact.solver import solve_contact
 from vecontact.solver.single import SingleGMRES
-
-
-def _allsum(values):
-    return np.asarray(values, dtype=np.float64).copy()
-
-
-def _system(n=240, seed=3):
-    """A non-symmetric operator with a spread spectrum (GMRES needs tens of iterations) and an
-    approximate inverse as preconditioner, like the steps' stiffness / compliance pair."""
-    rng = np.random.default_rng(seed)
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    lam = np.logspace(0, 2, n)
-    A = (Q * lam) @ Q.T + 3.0 * rng.standard_normal((n, n)) / np.sqrt(n)
-    Binv = (Q * lam) @ Q.T
-    B = np.linalg.inv(Binv + 0.3 * np.eye(n) * lam.mean())
-    b = rng.standard_normal(n)
-    return A, B, b
 
 
 def _ops(A, B):

@@ -81,8 +81,7 @@ class MeasureStop:
         else:                                  # m x = ds known (contactset.py)
             st.pressure_after(ds, self._p)
         meas = max(st.op.measures(self._g, self._p))
-        carried = step.carried.served if step.carried is not None else 0     # no Krylov iterations (carry.py)
-        self.trace.append((int(its) * step.cycle - carried, float(rnorm), float(meas)))
+        self.trace.append((step.krylov_iterations(its), float(rnorm), float(meas)))
         self._rho = meas / scale if scale > 0 else None
         if meas <= self.tol:
             st.keep(self._g, self._p)

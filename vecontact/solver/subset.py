@@ -393,13 +393,17 @@ class SubsetStep:
             self.carried = self._carried_directions()
             try:
                 self.ksp.solve(self._b, self._y)
+                self.iterations += self.krylov_iterations(self.ksp.getIterationNumber())
+                if self.carried is not None:
+                    self.carried_directions += self.carried.served
             finally:
-                served = self.carried.served if self.carried is not None else 0
                 self.carried = None
-                self.carried_directions += served
-            # the carried directions cost no FFT pair: they are not counted as iterations
-            self.iterations += self.cycle * self.ksp.getIterationNumber() - served
         self.solves += 1
+
+    def krylov_iterations(self, its):
+        """The Krylov iterations of ``its`` iterations of the running PETSc solve (self.ksp): ``cycle``
+        each, less the carried directions, which cost no FFT pair (carry.py)."""
+        return self.cycle * int(its) - (self.carried.served if self.carried is not None else 0)
 
     def _carried_directions(self):
         """CarriedDirections of the last solve (``carry``), or None; the last solve's memory is let
