@@ -1,20 +1,16 @@
 """benchmarks/fftw_builds.py: two FFTW libraries side by side in one process (here the one pyfftw runs on,
 twice: the same build must give the same round trip)."""
-import importlib.util
 import os
 import re
 
 import numpy as np
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from reference.bench import load
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_fftw", os.path.join(ROOT, "benchmarks", "fftw_builds.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("fftw_builds")
 
 
 def _loaded_fftw(single):

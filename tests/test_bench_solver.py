@@ -1,18 +1,14 @@
 """benchmarks/solver.py's summary: the headline ratios, and the side-by-side BLAS comparison (--blas)."""
-import importlib.util
 import os
 
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from reference.bench import ROOT, load
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_solver", os.path.join(ROOT, "benchmarks", "solver.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("solver")
 
 
 def _snes(N, v, target, pairs, seconds, t_pair, overhead, blas, pair_seconds=None):

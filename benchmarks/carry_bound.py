@@ -1,0 +1,284 @@
+"""What carrying Krylov directions across the free-set Newton steps could buy: a bound, and its cost.
+
+Usage (from the repository root):
+    python benchmarks/carry_bound.py [--n 1024] [--velocity 0.01] [--sigma0 153648.9] [--carry 10,30]
+                                     [--window 4]
+    mpiexec -n 2 python benchmarks/carry_bound.py --pass-cost [--n 1024] [--fraction 0.43]
+
+**Bound** (1 rank; the paper surface of benchmarks/solver.py, seed 1, Havriliak-Negami compound). One real
+solve records every free-set step of its finest grid (freeset.py: the set F, the right-hand side b, the
+solution the step reached).  Each step is then solved again in float64 numpy, to the relative residual
+the real step reached:
+
+* plain: right-preconditioned GMRES on A B (A = (m P_F .)_F / kappa, B the free-set preconditioner)
+  from zero, as the solver's steps;
+* carry K: GCRO.  The K newest directions z of the steps before (their preconditioned vectors, the
+  carried ones after the step's own), restricted to the new F, with their products C = A z: the
+  solution starts from the projection of b on span C, and every later Krylov vector is kept orthogonal
+  to it.  The products are formed exactly here, not counted.  With ``--window`` rho they are instead
+  mapped from the last step's: m's kernel cut to a (2 rho + 1)^2 window around each point that left
+  or joined F (what a solver would do: the kernel decays as 1/r^3).
+
+The Newton trajectory is the real one, so the iterations are a bound of carrying, not a solver's.
+Printed per step and in total: the iterations of the real solver, plain and each K.
+
+**Pass cost** (``--pass-cost``, every rank at once): what the projection adds to an iteration, two
+passes over K float32 vectors of a rank's free set (``--fraction`` of its grid points), against the
+float64 and float32 FFT pair (medians of 20, milliseconds).
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+Q0 = 2.5e5
+
+
+def paper_case(N, seed=1):
+    """The SlabFFT (1 rank), period, surface and modulus of benchmarks/solver.py's cases."""
+    from mpi4py import MPI
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.core.surface import generate
+    from vecontact.physics.modulus import HavriliakNegami
+    from vecontact.physics.spectrum import SelfAffine
+    L = 2 * math.pi / Q0
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate")
+    h = generate(fft, L, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), seed)
+    return fft, L, h, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+
+
+def record_free_steps(fft, L, h, modulus, velocity, sigma0):
+    """Solve once; return the solve's result and its finest grid's free-set steps (dicts)."""
+    import vecontact.solver.freeset as freeset
+    from vecontact.solver import solve_contact
+    steps = []
+    solve = freeset.FreeSetStep.solve
+
+    def recording(step):
+        before = step.iterations
+        solve(step)
+        if step.fft.N == fft.N:
+            steps.append(dict(idx=step.idx.copy(), n_active=step.n_active, b=step._b.getArray().copy(),
+                              y=step._y.getArray().copy(), its=step.iterations - before, op=step.op,
+                              kappa=step.kappa))
+    freeset.FreeSetStep.solve = recording
+    try:
+        result = solve_contact(fft, L, h, modulus, velocity, sigma0, tolerance=1e-8, store=())
+    finally:
+        freeset.FreeSetStep.solve = solve
+    return result, steps
+
+
+class FreeSystem:
+    """A and B of one free-set step (freeset.py) on 1 rank, float64."""
+
+    def __init__(self, fft, step):
+        self.fft, self.op, self.kappa = fft, step["op"], step["kappa"]
+        self.idx, self.n_active = step["idx"], step["n_active"]
+        self.buf, self.out = fft.real_array(), fft.real_array()
+
+    def _product(self, x, multiplier, scale):
+        self.buf[...] = 0.0
+        self.buf.ravel()[self.idx] = x
+        self.fft.apply(self.buf, multiplier, self.out, scale)
+        return self.out.ravel()
+
+    def A(self, x):
+        return self._product(x, self.op.m, 1.0 / self.kappa)[self.idx]
+
+    def B(self, z):
+        full = self._product(z, self.op.c, self.kappa)
+        y = full[self.idx]
+        return y - (full.sum() - y.sum()) / self.n_active       # the rigid shift (freeset.py)
+
+
+def gcro(system, b, target, U=None, C=None, max_it=2000):
+    """Right-preconditioned GMRES (modified Gram-Schmidt twice) on A B from x = U C^T b, every Krylov
+    vector kept orthogonal to C (orthonormal, C = A U), until the least-squares residual is at most
+    ``target`` |b|.  Returns (iterations, x, the directions z = B v of its own basis, columns)."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    if C is not None:
+        cr = C.T @ r
+        x += U @ cr
+        r -= C @ cr
+    beta = np.linalg.norm(r)
+    nb = np.linalg.norm(b)
+    if beta <= target * nb:
+        return 0, x, np.zeros((b.size, 0))
+    V, Z, CW = [r / beta], [], []
+    H = np.zeros((max_it + 1, max_it))
+    g = np.zeros(max_it + 1)
+    g[0] = beta
+    k = 0
+    while k < max_it:
+        z = system.B(V[k])
+        w = system.A(z)
+        if C is not None:
+            cw = C.T @ w
+            w -= C @ cw
+            CW.append(cw)
+        Z.append(z)
+        for _ in range(2):
+            for i in range(k + 1):
+                d = V[i] @ w
+                H[i, k] += d
+                w -= d * V[i]
+        H[k + 1, k] = np.linalg.norm(w)
+        V.append(w / H[k + 1, k])
+        k += 1
+        y = np.linalg.lstsq(H[:k + 1, :k], g[:k + 1], rcond=None)[0]
+        if np.linalg.norm(H[:k + 1, :k] @ y - g[:k + 1]) <= target * nb:
+            break
+    Zm = np.stack(Z, axis=1)
+    x += Zm @ y
+    if C is not None:
+        x -= U @ (np.stack(CW, axis=1) @ y)
+    return k, x, Zm
+
+
+class KernelMap:
+    """The products of carried directions on a new free set from the old ones: m's kernel (/kappa) cut
+    to a (2 rho + 1)^2 window around each point that left F (its column removed) or joined it (the
+    product formed there)."""
+
+    def __init__(self, fft, multiplier, scale, rho):
+        N = fft.N
+        if not 0 <= 2 * rho < N:
+            raise ValueError(f"--window {rho}: the window must fit in the {N}-point grid (0 <= rho < N/2)")
+        delta = fft.real_array()
+        delta[0, 0] = 1.0
+        kernel = fft.apply(delta, multiplier, fft.real_array(), scale)
+        self.off = np.arange(-rho, rho + 1)
+        self.window = kernel[np.ix_(self.off % N, self.off % N)].ravel()     # K(x - x_p), x = x_p + off
+        self.N = N
+
+    def points(self, p):
+        i, j = divmod(int(p), self.N)
+        return np.add.outer((i + self.off) % self.N * self.N, (j + self.off) % self.N).ravel()
+
+    def __call__(self, Z, W, old, new):
+        """Whole-grid columns: Z directions (zero off ``old``), W their products on ``old``; returns the
+        products of Z restricted to ``new`` (on ``new``) and how many points left and joined."""
+        left, joined = np.setdiff1d(old, new), np.setdiff1d(new, old)
+        W = W.copy()
+        for p in left:
+            W[self.points(p), :] -= np.outer(self.window, Z[p, :])
+        Zn = Z.copy()
+        Zn[left, :] = 0.0
+        back = self.window[::-1]                      # K(x_p - y), y = x_p + off
+        for p in joined:
+            W[p, :] = back @ Zn[self.points(p), :]
+        return W[new, :], left.size, joined.size
+
+
+def bound(args):
+    fft, L, h, modulus = paper_case(args.n)
+    result, steps = record_free_steps(fft, L, h, modulus, args.velocity, args.sigma0)
+    print(f"N {args.n}, {args.velocity} m/s, sigma0 {args.sigma0} Pa: A/A0 {result.area:.4f}, "
+          f"{result.fft_pairs:.1f} pairs, {len(steps)} free-set steps on the fine grid", flush=True)
+    if not steps:
+        return 1
+    first = FreeSystem(fft, steps[0])
+    kmap = KernelMap(fft, first.op.m, 1.0 / first.kappa, args.window) if args.window >= 0 else None
+    carries = [int(k) for k in args.carry.split(",")]
+    totals = dict(real=0, plain=0, **{f"K{k}": 0 for k in carries})
+    carried = {k: None for k in carries}        # K -> (Z whole-grid columns, their products, F)
+    n2 = args.n * args.n
+    for s, st in enumerate(steps):
+        system = FreeSystem(fft, st)
+        b = st["b"]
+        target = np.linalg.norm(b - system.A(st["y"])) / np.linalg.norm(b)
+        row = dict(step=s, F=int(st["idx"].size), target=float(f"{target:.3g}"), real=st["its"],
+                   plain=gcro(system, b, target)[0])
+        for k in carries:
+            U = C = None
+            if carried[k] is not None:
+                Z, W, old = carried[k]
+                U = Z[st["idx"], :]
+                if kmap is None:
+                    AU = np.stack([system.A(u) for u in U.T], axis=1)
+                else:
+                    AU, n_left, n_joined = kmap(Z, W, old, st["idx"])
+                    row["changed"] = [n_left, n_joined]
+                C, R = np.linalg.qr(AU)
+                keep = np.abs(np.diag(R)) > 1e-12 * np.abs(np.diag(R)).max()     # dependent columns out
+                U, C, R = U[:, keep], C[:, keep], R[np.ix_(keep, keep)]
+                U = np.linalg.solve(R.T, U.T).T        # A U R^-1 = C
+            its, x, own = gcro(system, b, target, U, C)
+            row[f"K{k}"] = its
+            row[f"K{k}_residual"] = float(f"{np.linalg.norm(b - system.A(x)) / np.linalg.norm(b):.3g}")
+            keep = own if U is None else np.concatenate([own, carried[k][0][st["idx"], :]], axis=1)
+            keep = keep[:, :k]
+            Z = np.zeros((n2, keep.shape[1]))
+            Z[st["idx"], :] = keep
+            W = np.zeros_like(Z)
+            W[st["idx"], :] = np.stack([system.A(z) for z in keep.T], axis=1)   # a solver has these
+            carried[k] = (Z, W, st["idx"])
+        for key in totals:
+            totals[key] += row[key]
+        print(json.dumps(row), flush=True)
+    print("total", json.dumps(totals))
+    return 0
+
+
+def pass_cost(args):
+    from mpi4py import MPI
+    from vecontact.core.pfft import SlabFFT
+    comm = MPI.COMM_WORLD
+    out = {}
+    for precision in ("double", "single"):
+        fft = SlabFFT(comm, args.n, planner="measure", precision=precision)
+        x = fft.real_array()
+        x[...] = np.random.default_rng(comm.rank).standard_normal(x.shape)
+        y = fft.real_array()
+        ones = np.ones(fft.local_fourier_shape, dtype=fft.complex_dtype)
+        out[f"pair_{precision}"] = _median_ms(comm, lambda: fft.apply(x, ones, y))
+    n = int(args.fraction * args.n * args.n / comm.size)
+    rng = np.random.default_rng(1)
+    w = rng.standard_normal(n).astype(np.float32)
+    for k in (10, 30, 60):
+        V = (rng.standard_normal((k, n)) / math.sqrt(n)).astype(np.float32)
+
+        def project():
+            h = comm.allreduce((V @ w).astype(np.float64))
+            w[...] -= (1e-9 * h).astype(np.float32) @ V     # scaled: the vector stays finite
+        out[f"K{k}"] = _median_ms(comm, project)
+    if comm.rank == 0:
+        print(json.dumps(dict(N=args.n, ranks=comm.size, fraction=args.fraction,
+                              ms={key: round(v, 2) for key, v in out.items()})))
+    return 0
+
+
+def _median_ms(comm, f, repeats=20):
+    for _ in range(3):
+        f()
+    t = []
+    for _ in range(repeats):
+        comm.Barrier()
+        t0 = time.perf_counter()
+        f()
+        t.append(time.perf_counter() - t0)
+    return float(np.median(t)) * 1e3
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--n", type=int, default=1024)
+    p.add_argument("--velocity", type=float, default=0.01, help="m/s")
+    p.add_argument("--sigma0", type=float, default=153648.9, help="Pa (the benchmark's 57 %% case at 1024^2)")
+    p.add_argument("--carry", default="10,30", help="numbers of carried directions K, comma-separated")
+    p.add_argument("--window", type=int, default=-1, help="rho of the kernel map (default: exact products)")
+    p.add_argument("--pass-cost", action="store_true")
+    p.add_argument("--fraction", type=float, default=0.43, help="--pass-cost: the free set's share of the grid")
+    args = p.parse_args(argv)
+    return pass_cost(args) if args.pass_cost else bound(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
