@@ -177,25 +177,25 @@ class KernelMap:
         return W[new, :], left.size, joined.size
 
 
-def bound(args):
-    fft, L, h, modulus = paper_case(args.n)
-    result, steps = record_free_steps(fft, L, h, modulus, args.velocity, args.sigma0)
-    print(f"N {args.n}, {args.velocity} m/s, sigma0 {args.sigma0} Pa: A/A0 {result.area:.4f}, "
-          f"{result.fft_pairs:.1f} pairs, {len(steps)} free-set steps on the fine grid", flush=True)
+def bound_rows(n, velocity, sigma0, carries, window=-1):
+    """The real solve's result and, per free-set step of its finest grid, a dict: the set's size, the
+    target (the relative residual the real step reached), the real and plain iterations and, per K in
+    ``carries``, GCRO's iterations (``K<k>``) and true relative residual (``K<k>_residual``); with a
+    ``window`` (rho >= 0) the carried products are mapped (KernelMap) and ``changed`` gives how many
+    points left and joined F."""
+    fft, L, h, modulus = paper_case(n)
+    result, steps = record_free_steps(fft, L, h, modulus, velocity, sigma0)
+    rows = []
     if not steps:
-        return 1
+        return result, rows
     first = FreeSystem(fft, steps[0])
-    kmap = KernelMap(fft, first.op.m, 1.0 / first.kappa, args.window) if args.window >= 0 else None
-    carries = [int(k) for k in args.carry.split(",")]
-    totals = dict(real=0, plain=0, **{f"K{k}": 0 for k in carries})
+    kmap = KernelMap(fft, first.op.m, 1.0 / first.kappa, window) if window >= 0 else None
     carried = {k: None for k in carries}        # K -> (Z whole-grid columns, their products, F)
-    n2 = args.n * args.n
     for s, st in enumerate(steps):
         system = FreeSystem(fft, st)
         b = st["b"]
         target = np.linalg.norm(b - system.A(st["y"])) / np.linalg.norm(b)
-        row = dict(step=s, F=int(st["idx"].size), target=float(f"{target:.3g}"), real=st["its"],
-                   plain=gcro(system, b, target)[0])
+        row = dict(step=s, F=int(st["idx"].size), target=target, real=st["its"], plain=gcro(system, b, target)[0])
         for k in carries:
             U = C = None
             if carried[k] is not None:
@@ -212,19 +212,28 @@ def bound(args):
                 U = np.linalg.solve(R.T, U.T).T        # A U R^-1 = C
             its, x, own = gcro(system, b, target, U, C)
             row[f"K{k}"] = its
-            row[f"K{k}_residual"] = float(f"{np.linalg.norm(b - system.A(x)) / np.linalg.norm(b):.3g}")
+            row[f"K{k}_residual"] = np.linalg.norm(b - system.A(x)) / np.linalg.norm(b)
             keep = own if U is None else np.concatenate([own, carried[k][0][st["idx"], :]], axis=1)
             keep = keep[:, :k]
-            Z = np.zeros((n2, keep.shape[1]))
+            Z = np.zeros((n * n, keep.shape[1]))
             Z[st["idx"], :] = keep
             W = np.zeros_like(Z)
             W[st["idx"], :] = np.stack([system.A(z) for z in keep.T], axis=1)   # a solver has these
             carried[k] = (Z, W, st["idx"])
-        for key in totals:
-            totals[key] += row[key]
-        print(json.dumps(row), flush=True)
-    print("total", json.dumps(totals))
-    return 0
+        rows.append(row)
+    return result, rows
+
+
+def bound(args):
+    carries = [int(k) for k in args.carry.split(",")]
+    result, rows = bound_rows(args.n, args.velocity, args.sigma0, carries, args.window)
+    print(f"N {args.n}, {args.velocity} m/s, sigma0 {args.sigma0} Pa: A/A0 {result.area:.4f}, "
+          f"{result.fft_pairs:.1f} pairs, {len(rows)} free-set steps on the fine grid")
+    for row in rows:
+        print(json.dumps({k: float(f"{v:.3g}") if isinstance(v, float) else v for k, v in row.items()}))
+    keys = ["real", "plain"] + [f"K{k}" for k in carries]
+    print("total", json.dumps({k: sum(row[k] for row in rows) for k in keys}))
+    return 0 if rows else 1
 
 
 def pass_cost(args):
