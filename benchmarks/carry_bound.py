@@ -2,7 +2,7 @@
 
 Usage (from the repository root):
     python benchmarks/carry_bound.py [--n 1024] [--velocity 0.01] [--sigma0 153648.9] [--carry 10,30]
-                                     [--window 4]
+                                     [--window 4] [--mode free|contact]
     mpiexec -n 2 python benchmarks/carry_bound.py --pass-cost [--n 1024] [--fraction 0.43]
 
 **Bound** (1 rank; the paper surface of benchmarks/solver.py, seed 1, Havriliak-Negami compound). One real
@@ -18,6 +18,9 @@ the real step reached:
   to it.  The products are formed exactly here, not counted.  With ``--window`` rho they are instead
   mapped from the last step's: m's kernel cut to a (2 rho + 1)^2 window around each point that left
   or joined F (what a solver would do: the kernel decays as 1/r^3).
+
+``--mode contact`` does the same for the contact-set steps (contactset.py: A = P c_CC P, B = P m_CC P
+without the edge correction, so "plain" exceeds the real solver's iterations; exact products only).
 
 The Newton trajectory is the real one, so the iterations are a bound of carrying, not a solver's.
 Printed per step and in total: the iterations of the real solver, plain and each K.
@@ -52,25 +55,28 @@ def paper_case(N, seed=1):
     return fft, L, h, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
 
 
-def record_free_steps(fft, L, h, modulus, velocity, sigma0):
-    """Solve once; return the solve's result and its finest grid's free-set steps (dicts)."""
-    import vecontact.solver.freeset as freeset
+def record_steps(fft, L, h, modulus, velocity, sigma0, mode="free"):
+    """Solve once; return the solve's result and its finest grid's Newton steps of ``mode`` (free:
+    freeset.FreeSetStep, contact: contactset.ContactSetStep) as dicts."""
     from vecontact.solver import solve_contact
+    from vecontact.solver.contactset import ContactSetStep
+    from vecontact.solver.freeset import FreeSetStep
+    cls = FreeSetStep if mode == "free" else ContactSetStep
     steps = []
-    solve = freeset.FreeSetStep.solve
+    solve = cls.solve
 
     def recording(step):
         before = step.iterations
         solve(step)
         if step.fft.N == fft.N:
-            steps.append(dict(idx=step.idx.copy(), n_active=step.n_active, b=step._b.getArray().copy(),
-                              y=step._y.getArray().copy(), its=step.iterations - before, op=step.op,
-                              kappa=step.kappa))
-    freeset.FreeSetStep.solve = recording
+            steps.append(dict(idx=step.idx.copy(), n_active=getattr(step, "n_active", 0),
+                              b=step._b.getArray().copy(), y=step._y.getArray().copy(),
+                              its=step.iterations - before, op=step.op, kappa=step.kappa))
+    cls.solve = recording
     try:
         result = solve_contact(fft, L, h, modulus, velocity, sigma0, tolerance=1e-8, store=())
     finally:
-        freeset.FreeSetStep.solve = solve
+        cls.solve = solve
     return result, steps
 
 
@@ -95,6 +101,20 @@ class FreeSystem:
         full = self._product(z, self.op.c, self.kappa)
         y = full[self.idx]
         return y - (full.sum() - y.sum()) / self.n_active       # the rigid shift (freeset.py)
+
+
+class ContactSystem(FreeSystem):
+    """A = P c_CC P and B = P m_CC P of one contact-set step (contactset.py; P removes the mean over C)
+    on 1 rank, float64.  B without the edge correction (edge.py): the bound compares plain and
+    carried solves with the same B, so its iterations exceed the real solver's."""
+
+    def A(self, x):
+        y = self._product(x, self.op.c, 1.0)[self.idx]
+        return y - y.mean()
+
+    def B(self, z):
+        y = self._product(z, self.op.m, 1.0)[self.idx]
+        return y - y.mean()
 
 
 def gcro(system, b, target, U=None, C=None, max_it=2000):
@@ -177,30 +197,36 @@ class KernelMap:
         return W[new, :], left.size, joined.size
 
 
-def bound_rows(n, velocity, sigma0, carries, window=-1):
+def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
     """The real solve's result and, per free-set step of its finest grid, a dict: the set's size, the
     target (the relative residual the real step reached), the real and plain iterations and, per K in
     ``carries``, GCRO's iterations (``K<k>``) and true relative residual (``K<k>_residual``); with a
     ``window`` (rho >= 0) the carried products are mapped (KernelMap) and ``changed`` gives how many
-    points left and joined F."""
+    points left and joined F.  ``mode`` contact: the contact-set steps instead (exact products only: c's
+    kernel decays as 1/r, no window holds it)."""
+    if mode == "contact" and window >= 0:
+        raise ValueError("--window: the contact-set steps' operator c has no local kernel")
     fft, L, h, modulus = paper_case(n)
-    result, steps = record_free_steps(fft, L, h, modulus, velocity, sigma0)
+    result, steps = record_steps(fft, L, h, modulus, velocity, sigma0, mode)
+    Sys = FreeSystem if mode == "free" else ContactSystem
     rows = []
     if not steps:
         return result, rows
-    first = FreeSystem(fft, steps[0])
+    first = Sys(fft, steps[0])
     kmap = KernelMap(fft, first.op.m, 1.0 / first.kappa, window) if window >= 0 else None
     carried = {k: None for k in carries}        # K -> (Z whole-grid columns, their products, F)
     for s, st in enumerate(steps):
-        system = FreeSystem(fft, st)
+        system = Sys(fft, st)
         b = st["b"]
         target = np.linalg.norm(b - system.A(st["y"])) / np.linalg.norm(b)
-        row = dict(step=s, F=int(st["idx"].size), target=target, real=st["its"], plain=gcro(system, b, target)[0])
+        row = dict(step=s, set=int(st["idx"].size), target=target, real=st["its"], plain=gcro(system, b, target)[0])
         for k in carries:
             U = C = None
             if carried[k] is not None:
                 Z, W, old = carried[k]
                 U = Z[st["idx"], :]
+                if mode == "contact":
+                    U = U - U.mean(axis=0)             # zero sum on the new C, as the Krylov vectors
                 if kmap is None:
                     AU = np.stack([system.A(u) for u in U.T], axis=1)
                 else:
@@ -226,9 +252,9 @@ def bound_rows(n, velocity, sigma0, carries, window=-1):
 
 def bound(args):
     carries = [int(k) for k in args.carry.split(",")]
-    result, rows = bound_rows(args.n, args.velocity, args.sigma0, carries, args.window)
+    result, rows = bound_rows(args.n, args.velocity, args.sigma0, carries, args.window, args.mode)
     print(f"N {args.n}, {args.velocity} m/s, sigma0 {args.sigma0} Pa: A/A0 {result.area:.4f}, "
-          f"{result.fft_pairs:.1f} pairs, {len(rows)} free-set steps on the fine grid")
+          f"{result.fft_pairs:.1f} pairs, {len(rows)} {args.mode}-set steps on the fine grid")
     for row in rows:
         print(json.dumps({k: float(f"{v:.3g}") if isinstance(v, float) else v for k, v in row.items()}))
     keys = ["real", "plain"] + [f"K{k}" for k in carries]
@@ -283,6 +309,7 @@ def main(argv=None):
     p.add_argument("--sigma0", type=float, default=153648.9, help="Pa (the benchmark's 57 %% case at 1024^2)")
     p.add_argument("--carry", default="10,30", help="numbers of carried directions K, comma-separated")
     p.add_argument("--window", type=int, default=-1, help="rho of the kernel map (default: exact products)")
+    p.add_argument("--mode", choices=("free", "contact"), default="free", help="which Newton steps")
     p.add_argument("--pass-cost", action="store_true")
     p.add_argument("--fraction", type=float, default=0.43, help="--pass-cost: the free set's share of the grid")
     args = p.parse_args(argv)
