@@ -19,8 +19,8 @@ the real step reached:
   mapped from the last step's: m's kernel cut to a (2 rho + 1)^2 window around each point that left
   or joined F (what a solver would do: the kernel decays as 1/r^3).
 
-``--mode contact`` does the same for the contact-set steps (contactset.py: A = P c_CC P, B = P m_CC P
-without the edge correction, so "plain" exceeds the real solver's iterations; exact products only).
+``--mode contact`` does the same for the contact-set steps (contactset.py: A = P c_CC P, B = P (m_CC +
+the edge correction) P, in float64 where the solver's changing steps run float32; exact products only).
 
 The Newton trajectory is the real one, so the iterations are a bound of carrying, not a solver's.
 Printed per step and in total: the iterations of the real solver, plain and each K.
@@ -70,6 +70,7 @@ def record_steps(fft, L, h, modulus, velocity, sigma0, mode="free"):
         solve(step)
         if step.fft.N == fft.N:
             steps.append(dict(idx=step.idx.copy(), n_active=getattr(step, "n_active", 0),
+                              act=~step.free if mode == "contact" else None,
                               b=step._b.getArray().copy(), y=step._y.getArray().copy(),
                               its=step.iterations - before, op=step.op, kappa=step.kappa))
     cls.solve = recording
@@ -104,9 +105,18 @@ class FreeSystem:
 
 
 class ContactSystem(FreeSystem):
-    """A = P c_CC P and B = P m_CC P of one contact-set step (contactset.py; P removes the mean over C)
-    on 1 rank, float64.  B without the edge correction (edge.py): the bound compares plain and
-    carried solves with the same B, so its iterations exceed the real solver's."""
+    """A = P c_CC P and B = P (m_CC + the edge correction) P of one contact-set step (contactset.py,
+    edge.py with SolverSettings' edge_window and edge_drop; P removes the mean over C) on 1 rank,
+    float64."""
+
+    def __init__(self, fft, step):
+        super().__init__(fft, step)
+        from vecontact.solver import SolverSettings
+        from vecontact.solver.edge import EdgeCorrection
+        st = SolverSettings()
+        self.edge = EdgeCorrection(self.op, st.edge_window, st.edge_drop) if st.edge_window > 0 else None
+        if self.edge is not None:
+            self.edge.build(step["act"], self.idx)
 
     def A(self, x):
         y = self._product(x, self.op.c, 1.0)[self.idx]
@@ -114,6 +124,9 @@ class ContactSystem(FreeSystem):
 
     def B(self, z):
         y = self._product(z, self.op.m, 1.0)[self.idx]
+        term = self.edge.apply(z) if self.edge is not None else None
+        if term is not None:
+            y += term
         return y - y.mean()
 
 
@@ -201,8 +214,8 @@ def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
     """The real solve's result and, per free-set step of its finest grid, a dict: the set's size, the
     target (the relative residual the real step reached), the real and plain iterations and, per K in
     ``carries``, GCRO's iterations (``K<k>``) and true relative residual (``K<k>_residual``); with a
-    ``window`` (rho >= 0) the carried products are mapped (KernelMap) and ``changed`` gives how many
-    points left and joined F.  ``mode`` contact: the contact-set steps instead (exact products only: c's
+    ``window`` (rho >= 0) the carried products are mapped (KernelMap).  ``changed``: how many points
+    left and joined the set since the step before.  ``mode`` contact: the contact-set steps instead (exact products only: c's
     kernel decays as 1/r, no window holds it)."""
     if mode == "contact" and window >= 0:
         raise ValueError("--window: the contact-set steps' operator c has no local kernel")
@@ -224,14 +237,14 @@ def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
             U = C = None
             if carried[k] is not None:
                 Z, W, old = carried[k]
+                row["changed"] = [np.setdiff1d(old, st["idx"]).size, np.setdiff1d(st["idx"], old).size]
                 U = Z[st["idx"], :]
                 if mode == "contact":
                     U = U - U.mean(axis=0)             # zero sum on the new C, as the Krylov vectors
                 if kmap is None:
                     AU = np.stack([system.A(u) for u in U.T], axis=1)
                 else:
-                    AU, n_left, n_joined = kmap(Z, W, old, st["idx"])
-                    row["changed"] = [n_left, n_joined]
+                    AU = kmap(Z, W, old, st["idx"])[0]
                 C, R = np.linalg.qr(AU)
                 keep = np.abs(np.diag(R)) > 1e-12 * np.abs(np.diag(R)).max()     # dependent columns out
                 U, C, R = U[:, keep], C[:, keep], R[np.ix_(keep, keep)]
