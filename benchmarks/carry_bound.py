@@ -105,18 +105,15 @@ class FreeSystem:
 
 
 class ContactSystem(FreeSystem):
-    """A = P c_CC P and B = P (m_CC + the edge correction) P of one contact-set step (contactset.py,
-    edge.py with SolverSettings' edge_window and edge_drop; P removes the mean over C) on 1 rank,
-    float64."""
+    """A = P c_CC P and B = P (m_CC + the edge correction) P of one contact-set step (contactset.py;
+    P removes the mean over C) on 1 rank, float64.  ``edge``: the grid's EdgeCorrection (``edge_of``),
+    built here for this step's set, as the solver does (one kernel for all the steps), or None."""
 
-    def __init__(self, fft, step):
+    def __init__(self, fft, step, edge):
         super().__init__(fft, step)
-        from vecontact.solver import SolverSettings
-        from vecontact.solver.edge import EdgeCorrection
-        st = SolverSettings()
-        self.edge = EdgeCorrection(self.op, st.edge_window, st.edge_drop) if st.edge_window > 0 else None
-        if self.edge is not None:
-            self.edge.build(step["act"], self.idx)
+        self.edge = edge
+        if edge is not None:
+            edge.build(step["act"], self.idx)
 
     def A(self, x):
         y = self._product(x, self.op.c, 1.0)[self.idx]
@@ -128,6 +125,14 @@ class ContactSystem(FreeSystem):
         if term is not None:
             y += term
         return y - y.mean()
+
+
+def edge_of(op):
+    """The EdgeCorrection of SolverSettings' edge_window and edge_drop on the grid of ``op``, or None."""
+    from vecontact.solver import SolverSettings
+    from vecontact.solver.edge import EdgeCorrection
+    st = SolverSettings()
+    return EdgeCorrection(op, st.edge_window, st.edge_drop) if st.edge_window > 0 else None
 
 
 def gcro(system, b, target, U=None, C=None, max_it=2000):
@@ -215,29 +220,31 @@ def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
     target (the relative residual the real step reached), the real and plain iterations and, per K in
     ``carries``, GCRO's iterations (``K<k>``) and true relative residual (``K<k>_residual``); with a
     ``window`` (rho >= 0) the carried products are mapped (KernelMap).  ``changed``: how many points
-    left and joined the set since the step before.  ``mode`` contact: the contact-set steps instead (exact products only: c's
-    kernel decays as 1/r, no window holds it)."""
+    left and joined the set since the step before.  ``mode`` contact: the contact-set steps instead
+    (exact products only: c's kernel decays as 1/r, no window holds it)."""
     if mode == "contact" and window >= 0:
         raise ValueError("--window: the contact-set steps' operator c has no local kernel")
     fft, L, h, modulus = paper_case(n)
     result, steps = record_steps(fft, L, h, modulus, velocity, sigma0, mode)
-    Sys = FreeSystem if mode == "free" else ContactSystem
     rows = []
     if not steps:
         return result, rows
-    first = Sys(fft, steps[0])
-    kmap = KernelMap(fft, first.op.m, 1.0 / first.kappa, window) if window >= 0 else None
-    carried = {k: None for k in carries}        # K -> (Z whole-grid columns, their products, F)
+    op, kappa = steps[0]["op"], steps[0]["kappa"]
+    edge = edge_of(op) if mode == "contact" else None
+    kmap = KernelMap(fft, op.m, 1.0 / kappa, window) if window >= 0 else None
+    carried = {k: None for k in carries}        # K -> (Z whole-grid columns, their products or None, F)
     for s, st in enumerate(steps):
-        system = Sys(fft, st)
+        system = FreeSystem(fft, st) if mode == "free" else ContactSystem(fft, st, edge)
         b = st["b"]
         target = np.linalg.norm(b - system.A(st["y"])) / np.linalg.norm(b)
         row = dict(step=s, set=int(st["idx"].size), target=target, real=st["its"], plain=gcro(system, b, target)[0])
+        if s > 0:
+            old = steps[s - 1]["idx"]
+            row["changed"] = [np.setdiff1d(old, st["idx"]).size, np.setdiff1d(st["idx"], old).size]
         for k in carries:
             U = C = None
             if carried[k] is not None:
                 Z, W, old = carried[k]
-                row["changed"] = [np.setdiff1d(old, st["idx"]).size, np.setdiff1d(st["idx"], old).size]
                 U = Z[st["idx"], :]
                 if mode == "contact":
                     U = U - U.mean(axis=0)             # zero sum on the new C, as the Krylov vectors
@@ -256,8 +263,10 @@ def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
             keep = keep[:, :k]
             Z = np.zeros((n * n, keep.shape[1]))
             Z[st["idx"], :] = keep
-            W = np.zeros_like(Z)
-            W[st["idx"], :] = np.stack([system.A(z) for z in keep.T], axis=1)   # a solver has these
+            W = None
+            if kmap is not None:                       # what the map starts from (a solver has these)
+                W = np.zeros_like(Z)
+                W[st["idx"], :] = np.stack([system.A(z) for z in keep.T], axis=1)
             carried[k] = (Z, W, st["idx"])
         rows.append(row)
     return result, rows

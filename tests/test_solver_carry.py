@@ -13,7 +13,7 @@ import pytest
 from mpi4py import MPI
 
 from reference.cases import L_PAPER, NU, Q0
-from reference.krylov import allsum as _allsum, system as _system
+from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
 from vecontact.core.pfft import SlabFFT
 from vecontact.core.surface import generate
@@ -27,8 +27,7 @@ from vecontact.solver.single import SingleGMRES
 def _flexible_solve(A, B, b, restart, rtol, work=np.float64):
     gm = SingleGMRES(b.size, restart, _allsum, flexible=True, work=work)
     x = np.empty(b.size)
-    its, _ = gm.solve(lambda u, out: np.copyto(out, A @ u, casting="same_kind"),
-                      lambda u, out: np.copyto(out, B @ u, casting="same_kind"), b, x, rtol, 0.0, 500)
+    its, _ = gm.solve(*_ops(A, B), b, x, rtol, 0.0, 500)
     return gm, its, x
 
 
@@ -49,8 +48,7 @@ def test_arnoldi_relation(restart, scale):
         assert np.linalg.norm(AZ[j] - VG[j]) <= 1e-5 * np.linalg.norm(AZ[j]), j
     # without a preconditioner's memory (GMRES, not FGMRES) nothing is recorded
     plain = SingleGMRES(b.size, restart, _allsum, flexible=False)
-    plain.solve(lambda u, out: np.copyto(out, A @ u, casting="same_kind"),
-                lambda u, out: np.copyto(out, B @ u, casting="same_kind"), b, np.empty(b.size), 1e-3, 0.0, 50)
+    plain.solve(*_ops(A, B), b, np.empty(b.size), 1e-3, 0.0, 50)
     assert plain.arnoldi is None
 
 

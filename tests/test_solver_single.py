@@ -14,7 +14,7 @@ import pytest
 from mpi4py import MPI
 
 from reference.cases import L_PAPER, NU, Q0
-from reference.krylov import allsum as _allsum, system as _system
+from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
 from vecontact.core.pfft import SlabFFT
 from vecontact.core.surface import generate
@@ -22,12 +22,6 @@ from vecontact.physics.modulus import HavriliakNegami
 from vecontact.physics.spectrum import SelfAffine
 from vecontact.solver import solve_contact
 from vecontact.solver.single import SingleGMRES
-
-
-def _ops(A, B):
-    def apply(M):
-        return lambda u, out: np.copyto(out, M @ u, casting="same_kind")
-    return apply(A), apply(B)
 
 
 @pytest.mark.parametrize("restart, work", [(200, np.float32), (15, np.float32), (15, np.float64)])

@@ -1,4 +1,4 @@
-"""Small dense systems for the Krylov solvers' tests (single.py, carry.py): SingleGMRES's operands."""
+"""Small dense systems for the Krylov solvers' tests (single.py, carry.py) and SingleGMRES's operands of them."""
 import numpy as np
 
 
@@ -18,3 +18,10 @@ def system(n=240, seed=3, scale=1.0):
     B = np.linalg.inv((Q * lam) @ Q.T + 0.3 * np.eye(n) * lam.mean())
     b = rng.standard_normal(n)
     return A, B, b
+
+
+def operators(A, B):
+    """SingleGMRES's (u, out) callables of the dense matrices A and B (out in its own dtype)."""
+    def apply(M):
+        return lambda u, out: np.copyto(out, M @ u, casting="same_kind")
+    return apply(A), apply(B)
