@@ -2,25 +2,16 @@
 
 * the Arnoldi relation a flexible SingleGMRES leaves behind (``arnoldi``): A Z[j] = sum_i G[i, j] V[i]
   to float32 rounding, with restarts and with rows rescaled by powers of two;
-* CarriedDirections: its products are A times its directions, it serves them in FGMRES's order
-  (a direction, then that direction's product), and its count respects the memory;
-* the solver on a paper surface at 10 m/s, default against ``-vc_carry_directions 0``: the same Newton
+* the solver on a paper surface at 10 m/s, ``-vc_carry_map_cost 0`` against ``-vc_carry_directions 0``: the same Newton
   path and answer, the exact step started from the carried directions and took fewer Krylov
   iterations and FFT pairs.
 """
 import numpy as np
 import pytest
-from mpi4py import MPI
 
-from reference.cases import L_PAPER, NU, Q0
+from reference.cases import paper_contact_solve
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
-from vecontact.core.pfft import SlabFFT
-from vecontact.core.surface import generate
-from vecontact.physics.modulus import HavriliakNegami
-from vecontact.physics.spectrum import SelfAffine
-from vecontact.solver import solve_contact
-from vecontact.solver.carry import CarriedDirections
 from vecontact.solver.single import SingleGMRES
 
 
@@ -52,45 +43,11 @@ def test_arnoldi_relation(restart, scale):
     assert plain.arnoldi is None
 
 
-def test_carried_directions_products_order_and_count():
-    A, B, b = _system(200, 11)
-    gm, its, _ = _flexible_solve(A, B, b, 100, 1e-4, work=np.float32)
-    k = gm.arnoldi[0]
-    carried = CarriedDirections(gm, 5)
-    assert carried.size == 5 and carried.U.dtype == np.float32 and carried.AU.dtype == np.float32
-    assert np.array_equal(carried.U, gm.Z[k - 5:k])      # the last cycle's last directions
-    for u, au in zip(carried.U, carried.AU):
-        ref = A @ u.astype(np.float64)
-        assert np.linalg.norm(au - ref) <= 1e-5 * np.linalg.norm(ref)
-    y = np.zeros(b.size)
-    assert not carried.serve_product(y)                   # no direction pending: the operator's own
-    for j in range(5):
-        assert carried.serve_direction(y) and np.array_equal(y, carried.U[j])
-        assert carried.serve_product(y) and np.array_equal(y, carried.AU[j])
-        assert not carried.serve_product(y)
-    assert not carried.serve_direction(y) and carried.served == 5
-    assert CarriedDirections(gm, 10 * k).size == k       # never more than the cycle has
-    # memory: 8 bytes an entry with a float32 copy and its float32 product
-    assert CarriedDirections.count(1000, 4, 30, 8000 * 12) == 12
-    assert CarriedDirections.count(1000, 8, 30, 1e12) == 30
-    assert CarriedDirections.count(1000, 4, 30, 7999) == 0
-
-
-def _solve(options):
-    N = 256
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
-    h = generate(fft, L_PAPER, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), 1)
-    hn = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
-    r = solve_contact(fft, L_PAPER, h, hn, 10.0, 1.0e5, tolerance=1e-8, store=("pressure",),
-                      petsc_options=options)
-    return r, fft.gather(r.pressure > 0)
-
-
 def test_exact_step_carries_the_last_steps_directions():
     """A/A0 ~ 7 % at 10 m/s: contact-set steps, whose exact step follows a float32 FGMRES step on the
     same set and must cut its residual by less than mixed_reduction_max (the float32 products)."""
-    on, act_on = _solve({})
-    off, act_off = _solve({"vc_carry_directions": "0"})
+    on, act_on = paper_contact_solve({"vc_carry_map_cost": "0"})      # the changing steps as without carrying
+    off, act_off = paper_contact_solve({"vc_carry_directions": "0"})
     d_on, d_off = on.diagnostics, off.diagnostics
     assert on.converged and off.converged and max(on.residual, off.residual) <= 1e-8
     assert d_on["step_modes"][-1][1] == "contact"

@@ -317,3 +317,49 @@ def test_edge_term_rebuilt_when_one_rank_changes(comm):
     x = np.random.default_rng(3).standard_normal(N * N)
     two, ref, one = _edge_terms(comm, h, [act, changed], x)
     assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0
+
+
+def test_carried_map_collective(comm):
+    """The map of carried directions to a new contact set (recycle.py) on 2 ranks against one: the left
+    and joined points of either slab reach the other's kernel columns (and the joined rows' sums span
+    both slabs), so each rank's rows match the one-rank map to rounding; the count of changed points
+    and the basis's size are the same on every rank."""
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
+    N = 24
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=5)
+    rng = np.random.default_rng(7)
+    old_set = h > np.quantile(h, 0.7)
+    new_set = old_set.copy()
+    new_set.flat[rng.choice(np.flatnonzero(old_set), 9, replace=False)] = False
+    new_set.flat[rng.choice(np.flatnonzero(~old_set), 7, replace=False)] = True
+    U_full = rng.standard_normal((4, N, N))
+    out = []
+    for c in (comm, comm.Split(comm.rank, 0)):
+        fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
+        rows = slice(fft.row_start, fft.row_stop)
+        op = ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows])
+        old, new = np.flatnonzero(old_set[rows].ravel()), np.flatnonzero(new_set[rows].ravel())
+        U = U_full[:, rows].reshape(4, -1)[:, old]
+        U -= (fft._allsum(U.sum(axis=1)) / int(old_set.sum()))[:, None]
+        W = np.empty(U.shape, dtype=np.float32)
+        buf, prod = fft.real_array(), fft.real_array()
+        for u, w in zip(U, W):                    # raw products on the old set, by FFT
+            buf[...] = 0.0
+            buf.ravel()[old] = u
+            fft.apply(buf, op.c, prod)
+            w[...] = prod.ravel()[old]
+        buf[...] = 0.0
+        buf.ravel()[new] = 1.0
+        ones_product = fft.apply(buf, op.c, prod).ravel()[new].copy()
+        n_new = int(new_set.sum())
+        got = CarriedSpace(old, U, W).mapped(fft, new, n_new, ComplianceKernel(op), ones_product)
+        full = np.zeros((4, N * N))
+        full[:, rows.start * N + new] = got.W          # this rank's rows, placed on the grid
+        out.append((full, CarriedSpace.changed(fft, old, new), got.basis(fft, n_new, 1e-8).size, rows))
+    (two, changed2, size2, rows), (one, changed1, size1, _) = out
+    assert changed2 == changed1 == 16 and size2 == size1 == 4
+    assert comm.allgather((changed2, size2)) == [(changed2, size2)] * comm.size
+    mine, ref = two[:, rows.start * N:rows.stop * N], one[:, rows.start * N:rows.stop * N]
+    assert np.abs(mine - ref).max() <= 1e-6 * np.abs(one).max()

@@ -4,8 +4,9 @@ An exact Newton step (policy.py: the active set did not change) solves the same 
 step before it, and its right-hand side is that step's inner residual: the Newton residual is affine
 on a fixed active set.  Restarting the Krylov solve from that residual throws away the space the
 last step had built, and the new solve spends its first iterations finding the slow directions again.
-So the last step's preconditioned vectors Z and their products A Z, known without an FFT pair from
-its Arnoldi relation A Z = V G (single.py, ``SingleGMRES.arnoldi``), start the exact step's FGMRES:
+So the last step's directions (its preconditioned vectors Z, with their products A Z known without an
+FFT pair from its Arnoldi relation A Z = V G, single.py, and the directions it carried itself,
+recycle.py), orthonormalised in their products, start the exact step's FGMRES:
 its first iterations take the carried z_j as their "preconditioned" vectors and A z_j from memory
 (``Restricted`` asks ``serve_direction`` / ``serve_product``), then it goes on as usual.  FGMRES
 minimises the residual over whatever vectors it is given, so this is the Krylov solve continued, as
@@ -22,37 +23,37 @@ import numpy as np
 
 __all__ = ["CarriedDirections"]
 
-# entries of the carried products formed at a time (a float32 block of the last step's basis)
-_BLOCK = 1 << 16
-
 
 class CarriedDirections:
-    """The last ``count`` preconditioned vectors of a flexible SingleGMRES solve's last cycle (``U``,
-    copies in the work dtype) and their products (``AU``, float32), handed to a PETSc FGMRES one
-    pair at a time: ``serve_direction(y)`` in place of the preconditioner, ``serve_product(y)`` in
-    place of the operator's product that follows it.  ``served``: directions handed out so far."""
+    """Directions ``U`` (rows) and their products ``AU`` (float32 rows, orthonormal), handed to a PETSc
+    FGMRES one pair at a time: ``serve_direction(y)`` in place of the preconditioner, ``serve_product(y)``
+    in place of the operator's product that follows it.  ``served``: directions handed out so far.
 
-    def __init__(self, gmres, count):
-        k, G = gmres.arnoldi
-        m = min(int(count), k)
-        cols = slice(k - m, k)
-        self.U = gmres.Z[cols].copy()
-        n = self.U.shape[1]
-        self.AU = np.empty((m, n), dtype=np.float32)
-        Gt = np.ascontiguousarray(G[:, cols].T, dtype=np.float32)
-        V = gmres.V[:k + 1]
-        for s in range(0, n, _BLOCK):        # A Z[j] = sum_i G[i, j] V[i]
-            e = min(s + _BLOCK, n)
-            np.matmul(Gt, V[:, s:e], out=self.AU[:, s:e])
+    Then ``start`` (the right-hand side less its part in span AU, float64) goes to the preconditioner once
+    in place of FGMRES's own next vector (``next_input``), which is the last carried product: the
+    Krylov space then grows from the residual, as GCRO's does (recycle.py), not from a carried
+    direction.  ``of_space(space, fft, n_S, drop, b)``: those of a recycle.CarriedSpace for the right-hand
+    side ``b``, orthonormalised (collective)."""
+
+    def __init__(self, U, AU, start=None):
+        self.U, self.AU = U, AU
+        self.start = start
         self.served = 0
         self._pending = None
 
-    @staticmethod
-    def count(n_loc, work_itemsize, directions, memory):
-        """How many directions to carry: at most ``directions``, within ``memory`` bytes a rank (a copy
-        of each in the work dtype and its float32 product, ``n_loc`` entries each)."""
-        per = max(int(n_loc), 1) * (work_itemsize + 4)
-        return max(0, min(int(directions), int(memory // per)))
+    @classmethod
+    def of_space(cls, space, fft, n_S, drop, b):
+        basis = space.basis(fft, n_S, drop)
+        start = np.array(b, dtype=np.float64)
+        start -= fft._allsum(basis.C @ start) @ basis.C
+        return cls(basis.U, basis.C, start)
+
+    def next_input(self, x):
+        """What the preconditioner takes after the carried directions: ``start`` once, then ``x``."""
+        if self.start is None or self.served < self.size:
+            return x
+        start, self.start = self.start, None
+        return start
 
     @property
     def size(self):

@@ -22,14 +22,15 @@ correction, a sparse term from small dense inverses of c on windows (edge.py; So
 0: none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
 orthogonalisation costs little next to the FFTs.
 
-A changing step starts its inner Krylov solve afresh.  Krylov recycling across the steps (GCRO with
-the directions of earlier solves mapped to the new set) saved 8-20 % of the FFT pairs but cost 11-50 %
-more wall time at 2048^2; it was deleted (benchmarks/RESULTS.md).  An exact step, whose set is the last
-step's, needs no map: its FGMRES starts from the last step's directions and their products, known
-without an FFT pair (carry.py, SolverSettings.carry_directions).
+A changing step's inner solve starts from the last step's directions, their products mapped to the new
+set with c's kernel columns of the points that changed (recycle.py, SolverSettings.carry_map_cost;
+GCRO in single.py).  An exact step, whose set is the last step's, needs no map: its FGMRES starts from
+the last step's directions and their products, known without an FFT pair (carry.py,
+SolverSettings.carry_directions).
 
-Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), and one pair per grid and
-solve for the edge correction's kernel.  The pressure of the next iterate needs no pair: m x = s is
+Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), one more where carried
+directions are mapped, and one pair per grid and solve for each of the edge correction's and the map's
+kernels.  The pressure of the next iterate needs no pair: m x = s is
 known (NewtonState.advance).
 The inner KSP has the options prefix ``<solver prefix>contact_`` (default FGMRES, right preconditioning,
 so its residual norm is the gap error on C in units of h_rms; restart SolverSettings.inner_restart).
@@ -42,6 +43,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.edge import EdgeCorrection
+from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
 from vecontact.solver.subset import Restricted, SubsetStep, gather
 
@@ -65,6 +67,7 @@ class ContactSetStep(SubsetStep):
         w = settings.edge_window
         self.edge = EdgeCorrection(op, w, settings.edge_drop) if w > 0 else None
         self.advance = None     # called (x, s) after each Newton update: NewtonState.advance (snes.py)
+        self._kernel = None     # c(x) on every rank, for the map of carried directions (made on first use)
 
     # ------------------------------------------------------------------ SubsetStep hooks
     def defaults(self, n_loc):
@@ -88,11 +91,25 @@ class ContactSetStep(SubsetStep):
         return B
 
     def _remove_mean(self, y, full):
-        y -= self.mean_C(y)
+        self.removed = self.mean_C(y)
+        y -= self.removed
+
+    def map_space(self, space):
+        """The last step's directions mapped to the current set (recycle.py), or None when the map
+        would gather more than carry_map_cost x N^2 kernel values.  Collective."""
+        changed = CarriedSpace.changed(self.fft, space.idx, self.idx)
+        if float(self.n_S) * changed > self.settings.carry_map_cost * float(self.fft.N) ** 2:
+            return None
+        if self._kernel is None:
+            self._kernel = ComplianceKernel(self.op)
+        g = self.grid
+        g.product_of(self.idx, np.ones(self.idx.size), self.op.c, 1.0)       # c 1_C: one pair
+        ones_product = gather(g.out, self.idx, np.empty(self.idx.size))
+        return space.mapped(self.fft, self.idx, self.n_S, self._kernel, ones_product)
 
     def release(self):
         super().release()
-        self.edge = self.advance = None
+        self.edge = self.advance = self._kernel = None
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):

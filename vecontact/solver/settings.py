@@ -104,9 +104,14 @@ class SolverSettings:
                              "correction (edge.py; 0: none) [RESULTS.md]", lo=0, hi=3)
     edge_drop: float = _knob(0.2, "... its entries below this fraction of their row's largest are dropped [RESULTS.md]",
                              lo=0, hi=1)
-    carry_directions: int = _knob(30, "an exact contact-set step's FGMRES starts from this many of the last "
-                                  "step's directions (carry.py; 0: none) [RESULTS.md]", lo=0)
+    carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
+                                  "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
+    carry_map_cost: float = _knob(8.0, "a changing contact-set step starts from the last step's directions, mapped "
+                                  "to its set (recycle.py), when |C| x (points changed) <= this x N^2 (0: never) "
+                                  "[RESULTS.md]", lo=0)
+    carry_drop: float = _knob(1e-8, "carried directions whose products' Gram eigenvalue is below this fraction of "
+                              "the largest are left out (recycle.py)", lo=0, hi=1)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)

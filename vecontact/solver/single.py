@@ -67,7 +67,8 @@ class SingleGMRES:
         self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
         self.rescales = 0     # basis rows rescaled by a power of two (solve), over all solves
         self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
-        self.arnoldi = None   # (k, G) of the last cycle: A Z[j] = sum_i G[i, j] V[i] (flexible; carry.py)
+        self.arnoldi = None   # (k, G) of the last cycle: A Z[j] = sum_i G[i, j] V[i] (+ C E; flexible; carry.py)
+        self.projected = None  # E (carried x k) of the last cycle: C^T A Z[j] (GCRO, solve's ``carried``)
 
     @staticmethod
     def sizes(n_loc, restart, flexible):
@@ -109,10 +110,21 @@ class SingleGMRES:
     def _norm(self, v):
         return math.sqrt(float(self.allsum(self._dots(v.reshape(1, -1), v))[0]))
 
-    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1):
+    def _project(self, carried, r, x):
+        """x += U C^T r, r -= C C^T r (GCRO's start on the carried space; r float64)."""
+        cr = self.allsum(carried.C @ r)
+        x += cr.astype(x.dtype) @ carried.U
+        r -= cr @ carried.C
+        return r
+
+    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
         (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
         estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy).
+
+        ``carried``: GCRO (recycle.py), an object with rows ``U`` (work dtype) and ``C`` = A U (float32,
+        orthonormal).  The solve starts from x = U C^T b, every product is kept orthogonal to C (its
+        coefficients E), and the update is x += Z y - U E y; the residual estimate stays exact.
 
         The basis is kept unnormalised: row i holds s_i v_i, v_i the orthonormal Arnoldi vector and
         s_i = |row i| (float64, s_0 = 1), so the operator's product, written into the next row, is
@@ -127,14 +139,24 @@ class SingleGMRES:
         self.history = [bnorm]
         target = max(rtol * bnorm, atol)
         res = bnorm
+        self.projected = None
         if bnorm == 0.0:
             return 0, 0.0
+        if carried is not None and carried.size:
+            r = self._project(carried, np.array(b, dtype=np.float64), x)
+            res = self._norm(r)
+            if res == 0.0 or (res <= target and min_it <= 0):
+                self.history.append(res)
+                return 0, res
+        else:
+            carried = None
         while True:
-            beta = self._norm(r) if its else bnorm
+            beta = self._norm(r) if its else res
             np.multiply(r, 1.0 / beta, out=V[0], casting="same_kind")
             m = self.restart
             H = np.zeros((m + 1, m))
             Hraw = np.zeros((m + 1, m)) if self.flexible else None   # H before the rotations
+            E = np.zeros((carried.size, m)) if carried is not None else None
             cs, sn = np.zeros(m), np.zeros(m)
             g = np.zeros(m + 1)
             g[0] = beta
@@ -148,6 +170,9 @@ class SingleGMRES:
                     B(V[k], zk)
                 t = V[k + 1]
                 A(zk, t)                                   # s_k A B v_k
+                if E is not None:                          # ... less its part in span C
+                    E[:, k] = self.allsum(self._dots(carried.C, t))
+                    self._subtract(carried.C, E[:, k].astype(np.float32), t)
                 dv = self.allsum(self._dots(V[:k + 1], t))  # classical Gram-Schmidt, sums in float64
                 si = s[:k + 1]                             # the lengths s_i of rows 0..k
                 tn = math.sqrt(float(self.allsum([self._subtract(V[:k + 1], (dv / si**2).astype(np.float32), t)])[0]))
@@ -182,6 +207,9 @@ class SingleGMRES:
             for i in range(k - 1, -1, -1):
                 y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
             y /= s[:k]
+            if E is not None:
+                x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
+                self.projected = E[:, :k]
             if self.flexible and B is not None:
                 np.dot(y.astype(z.dtype), self.Z[:k], out=z)
                 x += z
@@ -203,3 +231,5 @@ class SingleGMRES:
             np.copyto(z, x, casting="same_kind")
             A(z, V[0])
             r = b - V[0]
+            if carried is not None:
+                r = self._project(carried, r, x)

@@ -14,6 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.carry import CarriedDirections
+from vecontact.solver.recycle import CarriedSpace
 from vecontact.solver.single import SingleGMRES
 
 __all__ = ["Grid", "Mixed", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
@@ -159,8 +160,10 @@ class Restricted:
 
     def apply(self, pc, x, y):
         carried = self.step.carried            # ... its first preconditioned vectors: the carried ones
-        if carried is None or not carried.serve_direction(y.getArray()):
+        if carried is None:
             self._apply(x, y)
+        elif not carried.serve_direction(y.getArray()):
+            self.matvec(carried.next_input(x.getArray(readonly=True)), y.getArray())
 
     def setUp(self, pc):
         pass
@@ -303,7 +306,9 @@ class SubsetStep:
         self.ksp.setOptionsPrefix(inner_prefix)
         self._configured = False
         self._own_keys = []
-        self._carry_from = None         # the last single-precision FGMRES solve (carry.py), while it may carry
+        self._carry_from = None         # the last single-precision FGMRES solve and what it carried (_last_space)
+        self._unchanged = False         # the next solve's set is the last solve's (carry)
+        self.removed = 0.0              # the mean the operator's P took off its last product (ContactSetStep)
         self.carried = None             # the directions the running PETSc solve starts from (carry.py)
 
     def activate(self, ksp):
@@ -378,10 +383,15 @@ class SubsetStep:
             self.cycle = inner.getTolerances()[3]
 
     def carry(self, unchanged):
-        """Whether the next solve may start from the directions of the last one (carry.py): only if
-        the active set is the one it solved on (``unchanged``; snes.py) and nothing ran in between."""
-        if not unchanged:
-            self._carry_from = None
+        """Whether the next solve's set is the one the last solve ran on (``unchanged``; snes.py): an
+        exact step then starts from the last solve's directions as they are (carry.py), a changing one
+        from their map to its set (recycle.py, ``map_space``)."""
+        self._unchanged = bool(unchanged)
+
+    def map_space(self, space):
+        """``space`` (a recycle.CarriedSpace of the last set) on the current set, or None (the base
+        class: no map).  Collective."""
+        return None
 
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
@@ -406,17 +416,29 @@ class SubsetStep:
         return self.cycle * int(its) - (self.carried.served if self.carried is not None else 0)
 
     def _carried_directions(self):
-        """CarriedDirections of the last solve (``carry``), or None; the last solve's memory is let
-        go of.  Collective: every rank carries the same number."""
-        gm, self._carry_from = self._carry_from, None
+        """CarriedDirections of the last solve (``carry``) for an exact PETSc solve on its set, or None;
+        the last solve's memory is let go of.  Collective: every rank carries the same number."""
         # float32 products, like a mixed operator's, hold a solve near 1e-7 of its start: only where
         # the policy lets the operator round so (StepPolicy.mixed_reduction)
-        if gm is None or gm.arnoldi is None or self.cycle != 1 or not self.mixed:
+        if not (self._unchanged and self.cycle == 1 and self.mixed):
+            self._carry_from = None
             return None
+        space = self._last_space()
+        if space is None:
+            return None
+        return CarriedDirections.of_space(space, self.fft, self.n_S, self.settings.carry_drop, self._b.getArray(readonly=True))
+
+    def _last_space(self):
+        """The directions of the last solve (recycle.CarriedSpace, on its set), or None; its memory is
+        let go of.  Collective: every rank keeps the same number."""
+        pending, self._carry_from = self._carry_from, None
+        if pending is None or pending[0].arnoldi is None:
+            return None
+        gm, means, basis, older, idx = pending
         st = self.settings
-        count = CarriedDirections.count(self.idx.size, gm.Z.itemsize, st.carry_directions, st.carry_memory)
+        count = CarriedSpace.count(gm.n_loc, gm.Z.itemsize, st.carry_directions, st.carry_memory)
         count = self.comm.allreduce(count, op=MPI.MIN)
-        return CarriedDirections(gm, count) if count > 0 else None
+        return CarriedSpace.after_solve(gm, means, idx, count, basis, older) if count > 0 else None
 
     def _krylov_grid(self):
         """Where the PETSc solve's operator forms its products: with ``mixed`` (set_tolerances) and
@@ -483,7 +505,7 @@ class SubsetStep:
         b, y = self._b.getArray(readonly=True), self._y.getArray()
         allsum = self.fft._allsum
         k = self.cycle
-        self._carry_from = None
+        space = self._last_space()      # before the bases' memory is reused
         # float64 vectors' worth of memory an iteration: a float32 basis vector, and with FGMRES the
         # preconditioned one in the work precision
         fgmres_vectors = (4 + np.dtype(sg.work).itemsize) / 8
@@ -492,10 +514,22 @@ class SubsetStep:
             restart = self.comm.allreduce(self.settings.single_restart(n_loc, self.mode, vectors), op=MPI.MIN)
             if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
+            if space is not None and not self._unchanged:
+                space = self.map_space(space)
+            basis = space.basis(self.fft, self.n_S, self.settings.carry_drop) if space is not None else None
             gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.mode == "contact")
-            its, _ = gm.solve(sg.A.matvec, sg.B.matvec, b, y, rtol, atol, max_it)
+            A, means = sg.A.matvec, None
             if gm.flexible and self.settings.carry_directions > 0:
-                self._carry_from = gm           # its directions, should the next step be exact (carry.py)
+                means = []                      # what P took off each product: the raw products (recycle.py)
+
+                def A(z, out, product=sg.A.matvec):
+                    product(z, out)
+                    means.append(self.removed)
+            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis)
+            if means is not None:               # its directions, for the next step (carry.py, recycle.py)
+                self._carry_from = (gm, means, basis, space, self.idx)
+            if basis is not None:
+                self.carried_directions += basis.size
         else:   # cycles (freeset.start_cycles): FGMRES over exactly k GMRES iterations, as the KSP does
             restart = self.settings.single_restart(n_loc, "free", fgmres_vectors, reserve=k + 3)
             restart = self.comm.allreduce(restart, op=MPI.MIN)

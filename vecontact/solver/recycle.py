@@ -1,0 +1,194 @@
+"""Krylov directions carried across the contact-set Newton steps whose set changed (GCRO).
+
+A changing contact-set step solves A y = b, A = P c_CC P (contactset.py), on a set C that differs from
+the last step's C' in a few points: L left it, J joined it.  The last step's directions u' (its
+preconditioned vectors z, and those it carried itself) still span the slow modes of the new operator,
+if their products are known on the new set without an FFT pair each.  c's kernel decays only as 1/r,
+so no window holds it: each point that changed gets its kernel column over the whole set
+(``ComplianceKernel``: c(x) on the whole grid, on every rank).  With the raw products w' = (c u')_C'
+(before P):
+
+    u = u' on C and C' (0 on J), less its mean mu over C
+    (c u)(x) = w'(x) - sum_{l in L} c(x - l) u'(l)            x in C and C'
+    (c u)(x) = sum_{y in C and C'} c(x - y) u'(y)             x in J
+    less mu (c 1_C)(x)                                        (one FFT pair a step)
+
+That is |C| (|L| + |J|) kernel values gathered and two matrix products of K columns.  The map is made
+only when |C| (|L| + |J|) <= SolverSettings.carry_map_cost x N^2; after larger changes the step starts
+afresh.  The step's SingleGMRES then runs GCRO (single.py, ``carried``) on the orthonormalised
+products (``CarriedSpace.basis``).  Its own directions (the last cycle's z, their products from the
+Arnoldi relation), then the carried ones, K in all (carry_directions), are what the next step gets;
+an exact step (unchanged set) starts PETSc's FGMRES from them (carry.py).
+
+Products are float32 (the Krylov basis's precision), so the carried products err by ~1e-7 of their
+size; they only shape a step's Krylov space, never the answer: the Newton residual that judges a step
+is formed in float64.  Measurements: benchmarks/RESULTS.md, "Carrying directions across changing steps".
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+__all__ = ["CarriedSpace", "ComplianceKernel"]
+
+# kernel values gathered at a time (one int64 index and one float64 value each)
+_BLOCK = 1 << 20
+
+
+class ComplianceKernel:
+    """c(x), the compliance's response to a unit pressure at the origin, on the whole N x N grid of
+    every rank (one FFT pair and an allgather of N^2 float64: 128 MB at 4096^2).  Units: h_rms per
+    sigma0 (nondimensional, operator.py)."""
+
+    def __init__(self, op):
+        fft = op.fft
+        self.N = N = fft.N
+        d = fft.real_array()
+        d[...] = 0.0
+        if fft.row_start == 0:
+            d[0, 0] = 1.0
+        local = np.ascontiguousarray(fft.apply(d, op.c), dtype=np.float64)
+        self.values = np.empty(N * N)
+        counts, displs = fft._counts()
+        fft.comm.Allgatherv(local, [self.values, counts, displs, MPI.DOUBLE])
+
+    def block(self, xi, xj, yi, yj):
+        """c(x - y) for the points x (rows) and y (columns), global grid coordinates (int arrays)."""
+        N = self.N
+        k = ((xi[:, None] - yi[None, :]) % N) * N
+        k += (xj[:, None] - yj[None, :]) % N
+        return np.take(self.values, k)
+
+
+def _coordinates(fft, idx):
+    """Global (row, column) of the flat local points ``idx``."""
+    i, j = np.divmod(idx, fft.N)
+    return i + fft.row_start, j
+
+
+class CarriedSpace:
+    """Directions ``U`` (rows, each zero-sum over the set) on the flat local points ``idx`` of a contact
+    set, and their raw products ``W`` = (c U)_C before the mean's removal (float32): the last step's own
+    first, then those it carried.
+    Collective methods take the step's SlabFFT."""
+
+    def __init__(self, idx, U, W):
+        self.idx, self.U, self.W = idx, U, W
+
+    @property
+    def size(self):
+        return self.U.shape[0]
+
+    @staticmethod
+    def count(n_loc, work_itemsize, directions, memory):
+        """How many directions to keep: at most ``directions``, within ``memory`` bytes a rank (each in
+        the work dtype, its float32 product and, while a step runs, its orthonormalised pair)."""
+        per = max(int(n_loc), 1) * 2 * (work_itemsize + 4)
+        return max(0, min(int(directions), int(memory // per)))
+
+    @classmethod
+    def after_solve(cls, gm, means, idx, count, basis=None, older=None):
+        """The directions after a flexible SingleGMRES solve ``gm`` on the local points ``idx``: its last
+        cycle's z (the first ``count``) with their raw products, A z from the Arnoldi relation plus the
+        carried part C E (``basis``: the _Basis the solve carried, or None) plus the ``means`` the
+        operator's P removed (one per product, the last cycle's last); then the directions of
+        ``older`` (a CarriedSpace on the same set: the carried ones), ``count`` in all."""
+        k, G = gm.arnoldi
+        m = min(k, count)
+        U = gm.Z[:m].copy()
+        W = np.empty((m, U.shape[1]), dtype=np.float32)
+        Gt = np.ascontiguousarray(G[:, :m].T, dtype=np.float32)
+        np.matmul(Gt, gm.V[:k + 1], out=W)                 # A z_j = sum_i G[i, j] V[i] (+ C E)
+        if basis is not None and basis.size:
+            W += np.ascontiguousarray(gm.projected[:, :m].T, dtype=np.float32) @ basis.C
+        W += np.asarray(means[len(means) - k:len(means) - k + m], dtype=np.float32)[:, None]
+        extra = 0 if older is None else min(older.size, count - m)
+        if extra:
+            U = np.concatenate([U, older.U[:extra]])
+            W = np.concatenate([W, older.W[:extra]])
+        return cls(idx, U, W)
+
+    # ------------------------------------------------------------------ the map to a new set
+    @staticmethod
+    def changed(fft, old, new):
+        """Points (all ranks) that left or joined between the local sets ``old`` and ``new``."""
+        local = old.size + new.size - 2 * np.intersect1d(old, new, assume_unique=True).size
+        return fft.comm.allreduce(int(local), op=MPI.SUM)
+
+    def mapped(self, fft, new, n_new, kernel, ones_product):
+        """The directions on the new set ``new`` (flat local points, ``n_new`` on all ranks), as above.
+        ``ones_product``: (c 1_C)_C on the new set (float64, local points).  Collective."""
+        comm = fft.comm
+        old = self.idx
+        _, po, pn = np.intersect1d(old, new, assume_unique=True, return_indices=True)
+        left = np.setdiff1d(np.arange(old.size), po, assume_unique=True)
+        joined = np.setdiff1d(np.arange(new.size), pn, assume_unique=True)
+        k = self.size
+        U = np.zeros((k, new.size), dtype=self.U.dtype)
+        W = np.zeros((k, new.size), dtype=np.float32)
+        U[:, pn] = self.U[:, po]
+        W[:, pn] = self.W[:, po]
+        # the left points' columns, out of the common points' products
+        li, lj = _coordinates(fft, old[left])
+        gathered = comm.allgather((li, lj, np.ascontiguousarray(self.U[:, left].T, dtype=np.float64)))
+        Li, Lj, uL = (np.concatenate(a) for a in zip(*gathered))
+        ci, cj = _coordinates(fft, new[pn])
+        if Li.size:
+            for s, e in _blocks(pn.size, Li.size):
+                W[:, pn[s:e]] -= (kernel.block(ci[s:e], cj[s:e], Li, Lj) @ uL).T.astype(np.float32)
+        # the joined points' rows, summed over the common points of every rank
+        ji, jj = _coordinates(fft, new[joined])
+        gathered = comm.allgather((ji, jj))
+        Ji, Jj = (np.concatenate(a) for a in zip(*gathered))
+        if Ji.size:
+            rows = np.zeros((Ji.size, k))
+            Uc = U[:, pn]
+            for s, e in _blocks(pn.size, Ji.size):
+                rows += kernel.block(Ji, Jj, ci[s:e], cj[s:e]) @ Uc[:, s:e].T.astype(np.float64)
+            rows = fft._allsum(rows)
+            first = sum(g[0].size for g in gathered[:comm.rank])
+            W[:, joined] = rows[first:first + joined.size].T
+        # zero sum over the new set
+        mu = fft._allsum(U.sum(axis=1, dtype=np.float64)) / n_new
+        U -= mu[:, None].astype(U.dtype)
+        W -= (mu[:, None] * ones_product[None, :]).astype(np.float32)
+        return CarriedSpace(new, U, W)
+
+    # ------------------------------------------------------------------ GCRO's basis
+    def basis(self, fft, n_S, drop):
+        """(U, C): combinations of the directions whose products C = P W are orthonormal (float32 rows),
+        U the same combinations of the directions.  Directions whose Gram eigenvalue is below ``drop``
+        times the largest are left out (their float32 products would be amplified).  Collective."""
+        mean = fft._allsum(self.W.sum(axis=1, dtype=np.float64)) / n_S
+        G = np.zeros((self.size, self.size))
+        for s, e in _blocks(self.W.shape[1], self.size):
+            blk = self.W[:, s:e].astype(np.float64) - mean[:, None]
+            G += blk @ blk.T
+        G = fft._allsum(G)
+        d = np.sqrt(np.diag(G))
+        d = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)   # unit products first: the directions'
+        lam, Q = np.linalg.eigh(G * np.outer(d, d))                  # lengths span many decades
+        keep = lam > drop * lam[-1] if lam.size and lam[-1] > 0 else np.zeros(lam.size, dtype=bool)
+        T = (Q[:, keep] / np.sqrt(lam[keep])).T * d[None, :]         # rows: the combinations
+        C = np.empty((T.shape[0], self.W.shape[1]), dtype=np.float32)
+        for s, e in _blocks(self.W.shape[1], self.size):
+            C[:, s:e] = T @ (self.W[:, s:e].astype(np.float64) - mean[:, None])
+        U = (T.astype(self.U.dtype) @ self.U) if T.shape[0] else np.zeros((0, self.U.shape[1]), self.U.dtype)
+        return _Basis(self.idx, U, C)
+
+
+class _Basis:
+    """GCRO's carried pair on the set ``idx``: U (work dtype) and C = A U orthonormal (float32)."""
+
+    def __init__(self, idx, U, C):
+        self.idx, self.U, self.C = idx, U, C
+
+    @property
+    def size(self):
+        return self.U.shape[0]
+
+
+def _blocks(n, width):
+    """(start, stop) of consecutive ranges of n rows, about _BLOCK / width rows each."""
+    step = max(1, _BLOCK // max(int(width), 1))
+    return [(s, min(s + step, n)) for s in range(0, n, step)]
