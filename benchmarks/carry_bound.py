@@ -4,6 +4,7 @@ Usage (from the repository root):
     python benchmarks/carry_bound.py [--n 1024] [--velocity 0.01] [--sigma0 153648.9] [--carry 10,30]
                                      [--window 4] [--mode free|contact]
     mpiexec -n 2 python benchmarks/carry_bound.py --pass-cost [--n 1024] [--fraction 0.43]
+    mpiexec -n 2 python benchmarks/carry_bound.py --map-cost [--n 1024] [--fraction 0.05] [--changed 10,100,1000]
 
 **Bound** (1 rank; the paper surface of benchmarks/solver.py, seed 1, Havriliak-Negami compound). One real
 solve records every free-set step of its finest grid (freeset.py: the set F, the right-hand side b, the
@@ -28,6 +29,12 @@ Printed per step and in total: the iterations of the real solver, plain and each
 **Pass cost** (``--pass-cost``, every rank at once): what the projection adds to an iteration, two
 passes over K float32 vectors of a rank's free set (``--fraction`` of its grid points), against the
 float64 and float32 FFT pair (medians of 20, milliseconds).
+
+**Map cost** (``--map-cost``, every rank at once): what the solver's map of carried directions to a
+changed contact set costs (recycle.CarriedSpace.mapped, K = SolverSettings.carry_directions, the set a
+random ``--fraction`` of the grid, ``--changed`` points leaving and joining it in equal numbers),
+against the float64 FFT pair: milliseconds, and the map's pairs per unit of |C| (changed) / N^2, the
+measure SolverSettings.carry_map_cost gates by.
 """
 import argparse
 import json
@@ -312,6 +319,46 @@ def pass_cost(args):
     return 0
 
 
+def map_cost(args):
+    from types import SimpleNamespace
+
+    from mpi4py import MPI
+    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
+    from vecontact.solver.settings import SolverSettings
+    comm = MPI.COMM_WORLD
+    fft = SlabFFT(comm, args.n, planner="measure")
+    x, y = fft.real_array(), fft.real_array()
+    ones = np.ones(fft.local_fourier_shape, dtype=fft.complex_dtype)
+    pair = _median_ms(comm, lambda: fft.apply(x, ones, y))
+    kernel = ComplianceKernel(SimpleNamespace(fft=fft, c=1.0 / (1.0 + fft.kx ** 2 + fft.ky ** 2)))
+    k = SolverSettings().carry_directions
+    rng = np.random.default_rng(4)                  # the same sets on every rank
+    N2 = args.n * args.n
+    old_set = rng.random(N2) < args.fraction
+    lo, hi = fft.row_start * args.n, fft.row_stop * args.n
+    old = np.flatnonzero(old_set[lo:hi])
+    U = rng.standard_normal((k, old.size)).astype(np.float32)
+    space = CarriedSpace(old, U, U.copy())
+    rows = []
+    for changed in (int(c) for c in args.changed.split(",")):
+        new_set = old_set.copy()
+        new_set[rng.choice(np.flatnonzero(old_set), changed // 2, replace=False)] = False
+        new_set[rng.choice(np.flatnonzero(~old_set), changed - changed // 2, replace=False)] = True
+        new = np.flatnonzero(new_set[lo:hi])
+        n_new = int(new_set.sum())
+        ones_product = np.ones(new.size)
+        ms = _median_ms(comm, lambda: space.mapped(fft, new, n_new, kernel, ones_product), repeats=5)
+        units = n_new * changed / N2
+        rows.append({key: float(f"{v:.4g}") for key, v in
+                     dict(units=units, map_ms=ms, pairs=ms / pair, pairs_per_unit=ms / pair / units).items()})
+        rows[-1]["changed"] = changed
+    if comm.rank == 0:
+        print(json.dumps(dict(N=args.n, ranks=comm.size, fraction=args.fraction, K=k, pair_ms=float(f"{pair:.4g}"),
+                              rows=rows)))
+    return 0
+
+
 def _median_ms(comm, f, repeats=20):
     for _ in range(3):
         f()
@@ -333,8 +380,13 @@ def main(argv=None):
     p.add_argument("--window", type=int, default=-1, help="rho of the kernel map (default: exact products)")
     p.add_argument("--mode", choices=("free", "contact"), default="free", help="which Newton steps")
     p.add_argument("--pass-cost", action="store_true")
-    p.add_argument("--fraction", type=float, default=0.43, help="--pass-cost: the free set's share of the grid")
+    p.add_argument("--fraction", type=float, default=0.43,
+                   help="--pass-cost: the free set's share of the grid; --map-cost: the contact set's")
+    p.add_argument("--map-cost", action="store_true")
+    p.add_argument("--changed", default="10,100,1000", help="--map-cost: points changed, comma-separated")
     args = p.parse_args(argv)
+    if args.map_cost:
+        return map_cost(args)
     return pass_cost(args) if args.pass_cost else bound(args)
 
 

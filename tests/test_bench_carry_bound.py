@@ -1,4 +1,5 @@
 """benchmarks/carry_bound.py: its GCRO solve and the kernel map of carried products to a new free set."""
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -93,3 +94,15 @@ def test_bound_on_contact_set_steps(bench):
         assert row["set"] - before == row["changed"][1] - row["changed"][0]
     with pytest.raises(ValueError, match="--window"):
         bench.bound_rows(128, 0.01, 3000.0, [10], window=2, mode="contact")
+
+
+def test_map_cost_rows(bench, capsys):
+    """--map-cost: one row per number of changed points, its units |C| changed / N^2 from the sets it
+    made, and the pairs per unit derived from its own timings."""
+    assert bench.main(["--map-cost", "--n", "64", "--fraction", "0.1", "--changed", "4,40"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["N"] == 64 and out["K"] > 0 and out["pair_ms"] > 0
+    assert [r["changed"] for r in out["rows"]] == [4, 40]
+    for r in out["rows"]:
+        assert abs(r["units"] - 0.1 * r["changed"]) <= 0.03 * r["changed"]      # |C| ~ 0.1 N^2
+        assert r["map_ms"] > 0 and r["pairs"] == pytest.approx(r["map_ms"] / out["pair_ms"], rel=1e-3)

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from vecontact.solver.single import project_out
+
 __all__ = ["CarriedDirections"]
 
 
@@ -45,7 +47,7 @@ class CarriedDirections:
     def of_space(cls, space, fft, n_S, drop, b):
         basis = space.basis(fft, n_S, drop)
         start = np.array(b, dtype=np.float64)
-        start -= fft._allsum(basis.C @ start) @ basis.C
+        project_out(basis.C, start, fft._allsum)
         return cls(basis.U, basis.C, start)
 
     def next_input(self, x):

@@ -112,46 +112,48 @@ class CarriedSpace:
     @staticmethod
     def changed(fft, old, new):
         """Points (all ranks) that left or joined between the local sets ``old`` and ``new``."""
-        local = old.size + new.size - 2 * np.intersect1d(old, new, assume_unique=True).size
-        return fft.comm.allreduce(int(local), op=MPI.SUM)
+        po, _ = _match(old, new)
+        return fft.comm.allreduce(int(old.size + new.size - 2 * po.size), op=MPI.SUM)
 
     def mapped(self, fft, new, n_new, kernel, ones_product):
         """The directions on the new set ``new`` (flat local points, ``n_new`` on all ranks), as above.
         ``ones_product``: (c 1_C)_C on the new set (float64, local points).  Collective."""
         comm = fft.comm
         old = self.idx
-        _, po, pn = np.intersect1d(old, new, assume_unique=True, return_indices=True)
-        left = np.setdiff1d(np.arange(old.size), po, assume_unique=True)
-        joined = np.setdiff1d(np.arange(new.size), pn, assume_unique=True)
+        po, pn = _match(old, new)
+        left = _others(old.size, po)
+        joined = _others(new.size, pn)
         k = self.size
         U = np.zeros((k, new.size), dtype=self.U.dtype)
         W = np.zeros((k, new.size), dtype=np.float32)
-        U[:, pn] = self.U[:, po]
-        W[:, pn] = self.W[:, po]
+        for (so, eo), (sn, en) in _runs(po, pn):       # the common points: runs of the two sets
+            U[:, sn:en] = self.U[:, so:eo]
+            W[:, sn:en] = self.W[:, so:eo]
         # the left points' columns, out of the common points' products
         li, lj = _coordinates(fft, old[left])
         gathered = comm.allgather((li, lj, np.ascontiguousarray(self.U[:, left].T, dtype=np.float64)))
         Li, Lj, uL = (np.concatenate(a) for a in zip(*gathered))
-        ci, cj = _coordinates(fft, new[pn])
+        ci, cj = _coordinates(fft, new)       # (the joined points' rows get theirs below)
         if Li.size:
-            for s, e in _blocks(pn.size, Li.size):
-                W[:, pn[s:e]] -= (kernel.block(ci[s:e], cj[s:e], Li, Lj) @ uL).T.astype(np.float32)
-        # the joined points' rows, summed over the common points of every rank
+            for s, e in _blocks(new.size, Li.size):
+                W[:, s:e] -= (kernel.block(ci[s:e], cj[s:e], Li, Lj) @ uL).T.astype(np.float32)
+        # the joined points' rows, summed over the common points of every rank (U is 0 on the joined)
         ji, jj = _coordinates(fft, new[joined])
         gathered = comm.allgather((ji, jj))
         Ji, Jj = (np.concatenate(a) for a in zip(*gathered))
         if Ji.size:
             rows = np.zeros((Ji.size, k))
-            Uc = U[:, pn]
-            for s, e in _blocks(pn.size, Ji.size):
-                rows += kernel.block(Ji, Jj, ci[s:e], cj[s:e]) @ Uc[:, s:e].T.astype(np.float64)
+            for s, e in _blocks(new.size, Ji.size):
+                rows += kernel.block(Ji, Jj, ci[s:e], cj[s:e]) @ U[:, s:e].T.astype(np.float64)
             rows = fft._allsum(rows)
             first = sum(g[0].size for g in gathered[:comm.rank])
             W[:, joined] = rows[first:first + joined.size].T
         # zero sum over the new set
         mu = fft._allsum(U.sum(axis=1, dtype=np.float64)) / n_new
-        U -= mu[:, None].astype(U.dtype)
-        W -= (mu[:, None] * ones_product[None, :]).astype(np.float32)
+        ones32 = ones_product.astype(np.float32)
+        for i in range(k):
+            U[i] -= U.dtype.type(mu[i])
+            W[i] -= np.float32(mu[i]) * ones32
         return CarriedSpace(new, U, W)
 
     # ------------------------------------------------------------------ GCRO's basis
@@ -186,6 +188,31 @@ class _Basis:
     @property
     def size(self):
         return self.U.shape[0]
+
+
+def _match(old, new):
+    """Positions (po, pn) of the points common to the sorted index arrays ``old`` and ``new``."""
+    pos = np.searchsorted(new, old)
+    hit = pos < new.size
+    hit[hit] = new[pos[hit]] == old[hit]
+    return np.flatnonzero(hit), pos[hit]
+
+
+def _others(n, positions):
+    """The positions in range(n) not in ``positions``."""
+    mask = np.ones(n, dtype=bool)
+    mask[positions] = False
+    return np.flatnonzero(mask)
+
+
+def _runs(po, pn):
+    """((start, stop) in old, (start, stop) in new) of the runs where both position arrays step by one."""
+    if po.size == 0:
+        return []
+    cut = np.flatnonzero((np.diff(po) != 1) | (np.diff(pn) != 1)) + 1
+    starts = np.concatenate([[0], cut])
+    stops = np.concatenate([cut, [po.size]])
+    return [((po[a], po[b - 1] + 1), (pn[a], pn[b - 1] + 1)) for a, b in zip(starts, stops)]
 
 
 def _blocks(n, width):

@@ -107,9 +107,9 @@ class SolverSettings:
     carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
                                   "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
-    carry_map_cost: float = _knob(8.0, "a changing contact-set step starts from the last step's directions, mapped "
-                                  "to its set (recycle.py), when |C| x (points changed) <= this x N^2 (0: never) "
-                                  "[RESULTS.md]", lo=0)
+    carry_map_cost: float = _knob(10.0, "a changing contact-set step starts from the last step's K directions, "
+                                  "mapped to its set (recycle.py), when |C| x (points changed + 2 K) <= this x N^2 "
+                                  "(about that many FFT pairs; 0: never) [RESULTS.md]", lo=0)
     carry_drop: float = _knob(1e-8, "carried directions whose products' Gram eigenvalue is below this fraction of "
                               "the largest are left out (recycle.py)", lo=0, hi=1)
     inner_restart_max: int = _knob(100, "FGMRES restart of the contact-set steps' inner solve", lo=1)

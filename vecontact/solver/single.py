@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-__all__ = ["SingleGMRES"]
+__all__ = ["SingleGMRES", "dots", "project_out"]
 
 # entries summed in float32 before the partial sums go on in float64 (_dots)
 _CHUNK = 8192
@@ -37,6 +37,30 @@ _BLOCK = 32 * _CHUNK
 # inside float32's range for the products of _dots; the rows grow by ~2^4.5 an iteration at 10 m/s, so
 # about one iteration in ten rescales there (RESULTS.md, "An unnormalised float32 basis")
 _RANGE = 32
+
+
+def dots(M, v):
+    """M @ v (float32), summed in float32 over chunks of _CHUNK entries and in float64 over the chunks
+    (the local part: the caller sums over ranks).  One long float32 sum (BLAS sgemv) errs by ~sqrt(n) x
+    6e-8: enough, at n ~ 1e6, to spoil the orthogonality of the basis and the steps (RESULTS.md)."""
+    n = v.size
+    c = n // _CHUNK
+    out = np.zeros(M.shape[0])
+    if c:
+        Mc = M[:, :c * _CHUNK].reshape(M.shape[0], c, _CHUNK).transpose(1, 0, 2)
+        vc = v[:c * _CHUNK].reshape(c, _CHUNK, 1)
+        out += np.matmul(Mc, vc)[:, :, 0].sum(axis=0, dtype=np.float64)
+    if n > c * _CHUNK:
+        out += M[:, c * _CHUNK:] @ v[c * _CHUNK:]
+    return out
+
+
+def project_out(C, r, allsum):
+    """r -= C^T (C r) for orthonormal float32 rows C and a float64 r (in place; the coefficients in the
+    float32 rounding of r, their sums in float64 over chunks and ranks); returns the coefficients."""
+    cr = allsum(dots(C, r.astype(np.float32)))
+    r -= cr.astype(np.float32) @ C
+    return cr
 
 
 class SingleGMRES:
@@ -77,20 +101,7 @@ class SingleGMRES:
         n = int(n_loc)
         return (restart + 1) * n + min(n, _BLOCK), (restart + 1 if flexible else 1) * n
 
-    def _dots(self, M, v):
-        """M @ v (float32), summed in float32 over chunks of _CHUNK entries and in float64 over the
-        chunks.  One long float32 sum (BLAS sgemv) errs by ~sqrt(n) x 6e-8: enough, at n ~ 1e6, to
-        spoil the orthogonality of the basis and the steps (RESULTS.md)."""
-        n = v.size
-        c = n // _CHUNK
-        out = np.zeros(M.shape[0])
-        if c:
-            Mc = M[:, :c * _CHUNK].reshape(M.shape[0], c, _CHUNK).transpose(1, 0, 2)
-            vc = v[:c * _CHUNK].reshape(c, _CHUNK, 1)
-            out += np.matmul(Mc, vc)[:, :, 0].sum(axis=0, dtype=np.float64)
-        if n > c * _CHUNK:
-            out += M[:, c * _CHUNK:] @ v[c * _CHUNK:]
-        return out
+    _dots = staticmethod(dots)
 
     def _subtract(self, M, h, t):
         """t -= h @ M (float32), a block of _BLOCK entries at a time, and returns the local t.t after it
@@ -112,9 +123,8 @@ class SingleGMRES:
 
     def _project(self, carried, r, x):
         """x += U C^T r, r -= C C^T r (GCRO's start on the carried space; r float64)."""
-        cr = self.allsum(carried.C @ r)
+        cr = project_out(carried.C, r, self.allsum)
         x += cr.astype(x.dtype) @ carried.U
-        r -= cr @ carried.C
         return r
 
     def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None):
