@@ -25,20 +25,29 @@ def test_case_bytes_covers_the_measured_peaks():
     # the basis term is the restart rules' largest basis (SolverSettings.restart, inner_restart): the
     # 3 GB budget where it binds (4096^2 on one rank), floored to whole FGMRES iterations
     n = 4096 ** 2
-    basis = (memory.case_bytes(4096, 1) - memory.BYTES_PER_POINT * n) / memory.KRYLOV_PEAK
+    carry = 4 * n                                          # the map's kernel (float32), within carry_memory / 2
+    basis = (memory.case_bytes(4096, 1) - memory.BYTES_PER_POINT * n - carry) / memory.KRYLOV_PEAK
     assert 3e9 - 2 * 8 * 0.3 * n <= basis <= 3e9
     # a small budget: restart_min binds, the free-set GMRES holds 11 whole-grid vectors (1.5 GB)
     small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
-    basis = (memory.case_bytes(4096, 1, small) - memory.BYTES_PER_POINT * n) / memory.KRYLOV_PEAK
+    basis = (memory.case_bytes(4096, 1, small) - memory.BYTES_PER_POINT * n - carry) / memory.KRYLOV_PEAK
     assert basis == pytest.approx(8 * (small.restart_min + 1) * n, rel=1e-12)
     # a small grid: the caps bind, the free-set GMRES's 121 vectors on every point outweigh the inner
     # FGMRES's 2 x 101 on the 30 % of them solved on the contact set; with contact-set steps
     # everywhere the inner FGMRES holds 2 x 101 whole-grid vectors
     n = 256 * 256
+    carry = 4 * n
     assert memory.case_bytes(256, 1) == pytest.approx(
-        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 121 * n, rel=1e-12)
+        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 121 * n + carry, rel=1e-12)
     assert memory.case_bytes(256, 1, SolverSettings(contact_step="contact")) == pytest.approx(
-        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 202 * n, rel=1e-12)
+        memory.BYTES_PER_POINT * n + memory.KRYLOV_PEAK * 8 * 202 * n + carry, rel=1e-12)
+    # no kernel without the map, without carrying, or where it would not fit within half of carry_memory
+    # (8192^2: 268 MB against 150 MB)
+    for off in (SolverSettings(carry_map_cost=0.0), SolverSettings(carry_directions=0),
+                SolverSettings(carry_memory=8 * n - 1)):
+        assert memory.case_bytes(256, 1, off) == pytest.approx(memory.case_bytes(256, 1) - carry, rel=1e-12)
+    assert memory.case_bytes(8192, 1) == memory.case_bytes(8192, 1, SolverSettings(carry_map_cost=0.0))
+    assert memory.case_bytes(8192, 1, SolverSettings(carry_memory=6e8)) > memory.case_bytes(8192, 1)
 
 
 def test_auto_by_memory():

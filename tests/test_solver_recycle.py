@@ -204,3 +204,15 @@ def test_changing_steps_carry_across_the_set_changes():
     assert differ <= 4, differ
     assert abs(on.mu / off.mu - 1) <= 1e-6, (on.mu, off.mu)
     assert on.linear_iterations < 0.9 * off.linear_iterations and on.fft_pairs < 0.95 * off.fft_pairs
+
+
+def test_no_map_where_the_kernel_exceeds_carry_memory():
+    """The map's kernel (4 N^2 bytes on every rank, 0.26 MB at 256^2) must fit within half of
+    carry_memory: with less, the fine grid's steps are those without the map (the coarse grids' kernels
+    still fit)."""
+    small = {"vc_carry_memory": "5e5"}
+    capped, _ = paper_contact_solve(small)
+    off, _ = paper_contact_solve(dict(small, vc_carry_map_cost="0"))
+    mapped, _ = paper_contact_solve({"vc_carry_memory": "6e5"})
+    assert capped.diagnostics["linear_history"] == off.diagnostics["linear_history"]
+    assert mapped.diagnostics["linear_history"] != off.diagnostics["linear_history"]

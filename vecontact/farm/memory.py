@@ -12,6 +12,7 @@ on the process's group and its ancestors: what a batch scheduler grants).
 """
 import os
 
+from vecontact.solver.recycle import ComplianceKernel
 from vecontact.solver.settings import SolverSettings
 
 __all__ = ["case_bytes", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
@@ -33,14 +34,17 @@ def case_bytes(N, g, settings=None):
     ``settings``' restart rules give a step: a free-set GMRES over all of a rank's points, or the
     contact-set steps' inner FGMRES (two vectors an iteration) over the largest contact set solved on
     (contact_step_area; all points with contact_step "contact").  That is their budgets (3 GB a rank
-    by default), less where the restart caps bind, more where ``restart_min`` does."""
+    by default), less where the restart caps bind, more where ``restart_min`` does.  Plus the kernel of
+    the contact-set steps' map of carried directions (recycle.py), N^2 float64 on every rank whatever
+    ``g``, where it is made (within half of carry_memory)."""
     s = SolverSettings() if settings is None else settings
     n = float(N) * float(N) / max(1, int(g))
     widest = max(s.contact_step_area, s.contact_step_area_large)
     n_contact = {"contact": 1.0, "free": 0.0}.get(s.contact_step, widest) * n
     free = (s.restart(n) + 1) * n
     inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact
-    return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner)
+    kernel = ComplianceKernel.bytes(N) if ComplianceKernel.fits(N, s) else 0.0
+    return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner) + kernel
 
 
 def _read_int(path):

@@ -13,16 +13,17 @@ so no window holds it: each point that changed gets its kernel column over the w
     (c u)(x) = sum_{y in C and C'} c(x - y) u'(y)             x in J
     less mu (c 1_C)(x)                                        (one FFT pair a step)
 
-That is |C| (|L| + |J|) kernel values gathered and two matrix products of K columns.  The map is made
-only when |C| (|L| + |J|) <= SolverSettings.carry_map_cost x N^2; after larger changes the step starts
-afresh.  The step's SingleGMRES then runs GCRO (single.py, ``carried``) on the orthonormalised
+That is |C| (|L| + |J|) kernel values gathered and two matrix products of K columns, and the copies of
+the K directions and products over C.  The map is made only when |C| (|L| + |J| + 2 K) <=
+SolverSettings.carry_map_cost x N^2 (contactset.ContactSetStep.map_space); after larger changes, and
+on large contact sets, the step starts afresh.  The step's SingleGMRES then runs GCRO (single.py, ``carried``) on the orthonormalised
 products (``CarriedSpace.basis``).  Its own directions (the last cycle's z, their products from the
 Arnoldi relation), then the carried ones, K in all (carry_directions), are what the next step gets;
 an exact step (unchanged set) starts PETSc's FGMRES from them (carry.py).
 
 Products are float32 (the Krylov basis's precision), so the carried products err by ~1e-7 of their
 size; they only shape a step's Krylov space, never the answer: the Newton residual that judges a step
-is formed in float64.  Measurements: benchmarks/RESULTS.md, "Carrying directions across changing steps".
+is formed in float64.  Measurements: benchmarks/RESULTS.md, "`carry_map_cost`".
 """
 from __future__ import annotations
 
@@ -31,14 +32,14 @@ from mpi4py import MPI
 
 __all__ = ["CarriedSpace", "ComplianceKernel"]
 
-# kernel values gathered at a time (one int64 index and one float64 value each)
+# kernel values gathered at a time (one int64 index and one float32 value each)
 _BLOCK = 1 << 20
 
 
 class ComplianceKernel:
     """c(x), the compliance's response to a unit pressure at the origin, on the whole N x N grid of
-    every rank (one FFT pair and an allgather of N^2 float64: 128 MB at 4096^2).  Units: h_rms per
-    sigma0 (nondimensional, operator.py)."""
+    every rank (one FFT pair and an allgather of N^2 float32: 64 MB at 4096^2; float32 as the carried
+    products).  Units: h_rms per sigma0 (nondimensional, operator.py)."""
 
     def __init__(self, op):
         fft = op.fft
@@ -47,10 +48,21 @@ class ComplianceKernel:
         d[...] = 0.0
         if fft.row_start == 0:
             d[0, 0] = 1.0
-        local = np.ascontiguousarray(fft.apply(d, op.c), dtype=np.float64)
-        self.values = np.empty(N * N)
+        local = np.ascontiguousarray(fft.apply(d, op.c), dtype=np.float32)
+        self.values = np.empty(N * N, dtype=np.float32)
         counts, displs = fft._counts()
-        fft.comm.Allgatherv(local, [self.values, counts, displs, MPI.DOUBLE])
+        fft.comm.Allgatherv(local, [self.values, counts, displs, MPI.FLOAT])
+
+    @staticmethod
+    def bytes(N):
+        return 4.0 * float(N) * float(N)
+
+    @classmethod
+    def fits(cls, N, settings):
+        """Whether an N x N grid's steps may map (SolverSettings: carry_directions and carry_map_cost
+        above 0, and the kernel within half of carry_memory: up to N = 6123 by default)."""
+        return (settings.carry_directions > 0 and settings.carry_map_cost > 0
+                and cls.bytes(N) <= 0.5 * settings.carry_memory)
 
     def block(self, xi, xj, yi, yj):
         """c(x - y) for the points x (rows) and y (columns), global grid coordinates (int arrays)."""
@@ -159,8 +171,9 @@ class CarriedSpace:
     # ------------------------------------------------------------------ GCRO's basis
     def basis(self, fft, n_S, drop):
         """(U, C): combinations of the directions whose products C = P W are orthonormal (float32 rows),
-        U the same combinations of the directions.  Directions whose Gram eigenvalue is below ``drop``
-        times the largest are left out (their float32 products would be amplified).  Collective."""
+        U the same combinations of the directions.  Combinations whose eigenvalue of the Gram matrix of
+        the unit products is below ``drop`` times the largest are left out (their float32 products would
+        be amplified).  Collective."""
         mean = fft._allsum(self.W.sum(axis=1, dtype=np.float64)) / n_S
         G = np.zeros((self.size, self.size))
         for s, e in _blocks(self.W.shape[1], self.size):
