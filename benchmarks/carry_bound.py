@@ -49,15 +49,16 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 Q0 = 2.5e5
 
 
-def paper_case(N, seed=1):
-    """The SlabFFT (1 rank), period, surface and modulus of benchmarks/solver.py's cases."""
+def paper_case(N, seed=1, comm=None, planner="estimate"):
+    """The SlabFFT (on ``comm``, default 1 rank), period, surface and modulus of benchmarks/solver.py's
+    cases."""
     from mpi4py import MPI
     from vecontact.core.pfft import SlabFFT
     from vecontact.core.surface import generate
     from vecontact.physics.modulus import HavriliakNegami
     from vecontact.physics.spectrum import SelfAffine
     L = 2 * math.pi / Q0
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate")
+    fft = SlabFFT(MPI.COMM_SELF if comm is None else comm, N, planner=planner)
     h = generate(fft, L, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), seed)
     return fft, L, h, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
 
@@ -320,18 +321,16 @@ def pass_cost(args):
 
 
 def map_cost(args):
-    from types import SimpleNamespace
-
     from mpi4py import MPI
-    from vecontact.core.pfft import SlabFFT
+    from vecontact.solver.operator import ContactOperator
     from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
     from vecontact.solver.settings import SolverSettings
     comm = MPI.COMM_WORLD
-    fft = SlabFFT(comm, args.n, planner="measure")
+    fft, L, h, modulus = paper_case(args.n, comm=comm, planner="measure")
     x, y = fft.real_array(), fft.real_array()
     ones = np.ones(fft.local_fourier_shape, dtype=fft.complex_dtype)
     pair = _median_ms(comm, lambda: fft.apply(x, ones, y))
-    kernel = ComplianceKernel(SimpleNamespace(fft=fft, c=1.0 / (1.0 + fft.kx ** 2 + fft.ky ** 2)))
+    kernel = ComplianceKernel(ContactOperator(fft, L, modulus, 10.0, 1e5, h))     # the compliance at 10 m/s
     k = SolverSettings().carry_directions
     rng = np.random.default_rng(4)                  # the same sets on every rank
     N2 = args.n * args.n

@@ -68,11 +68,7 @@ class EdgeCorrection:
         |d| <= 2w gathered to every rank."""
         if self._base is None:
             fft, w, N = self.fft, self.w, self.fft.N
-            d = fft.real_array()
-            d[...] = 0.0
-            if fft.row_start == 0:
-                d[0, 0] = 1.0
-            kern = fft.apply(d, self.op.c)
+            kern = self.op.compliance_response()
             off = np.arange(-2 * w, 2 * w + 1)
             table = np.zeros((off.size, off.size))
             for i, r in enumerate(off % N):

@@ -150,6 +150,16 @@ class ContactOperator:
         return hi / lo if hi > 0 else 1.0
 
     # ------------------------------------------------------------------ nondimensional maps
+    def compliance_response(self):
+        """c(x) on the local rows: the gap (h_rms) under a unit pressure (sigma0) at the origin, the
+        compliance's kernel, (c p)(x) = sum_y c(x - y) p(y) (one FFT pair)."""
+        fft = self.fft
+        d = fft.real_array()
+        d[...] = 0.0
+        if fft.row_start == 0:
+            d[0, 0] = 1.0
+        return fft.apply(d, self.c, d)
+
     def pressure(self, ghat, out=None):
         """p^ = 1 + m g^ + p_h (one FFT pair)."""
         out = self.fft.apply(ghat, self.m, out)

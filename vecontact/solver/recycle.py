@@ -44,11 +44,7 @@ class ComplianceKernel:
     def __init__(self, op):
         fft = op.fft
         self.N = N = fft.N
-        d = fft.real_array()
-        d[...] = 0.0
-        if fft.row_start == 0:
-            d[0, 0] = 1.0
-        local = np.ascontiguousarray(fft.apply(d, op.c), dtype=np.float32)
+        local = np.ascontiguousarray(op.compliance_response(), dtype=np.float32)
         self.values = np.empty(N * N, dtype=np.float32)
         counts, displs = fft._counts()
         fft.comm.Allgatherv(local, [self.values, counts, displs, MPI.FLOAT])
