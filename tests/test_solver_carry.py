@@ -44,7 +44,7 @@ def test_arnoldi_relation(restart, scale):
 
 
 def test_exact_step_carries_the_last_steps_directions():
-    """A/A0 ~ 7 % at 10 m/s: contact-set steps, whose exact step follows a float32 FGMRES step on the
+    """A/A0 ~ 7.6 % at 10 m/s: contact-set steps, whose exact step follows a float32 FGMRES step on the
     same set and must cut its residual by less than mixed_reduction_max (the float32 products)."""
     on, act_on = paper_contact_solve({"vc_carry_map_cost": "0"})      # the changing steps as without carrying
     off, act_off = paper_contact_solve({"vc_carry_directions": "0"})

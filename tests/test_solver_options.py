@@ -103,7 +103,7 @@ def test_settings_options_override_fields():
 
 def test_settings_check_their_ranges():
     for bad in (dict(lin_rtol=0.0), dict(restart_max=1.5), dict(contact_step_area=1.2),
-                dict(bearing_area_min=0.5, bearing_area_max=0.4), dict(smooth_omega=float("inf")),
+                dict(bearing_area_min=0.5, bearing_area_max=0.4), dict(smooth_ratio=0.5),
                 dict(coarse_levels=True)):
         with pytest.raises(ValueError):
             SolverSettings(**bad)

@@ -66,7 +66,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         sigma0) starts the CG.
     coarse : snes only; solve on the coarse grids N/2^k >= settings.coarse_min_n (at most
         settings.coarse_levels of them, coarsest first), each warm-starting the next by trigonometric
-        interpolation + settings.smooth_sweeps projected-Jacobi sweeps (see warmstart.py); the coarse
+        interpolation + settings.smooth_sweeps projected Richardson sweeps (see warmstart.py); the coarse
         grids hold all the roughness of null-band surfaces.  Ignored when N is too small.
     max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it) or CG
         iterations (pk, default settings.pk_max_it)
@@ -131,12 +131,12 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 if prev is None and wst is not None:
                     # previous solution of the sweep, restricted to the coarsest grid
                     gw = transfer_real(fft, wst["gap"], fc)
-                    gc0 = smooth_gap(opc, np.maximum(gw / opc.ell, 0.0), cfg.smooth_sweeps, cfg.smooth_omega)
+                    gc0 = smooth_gap(opc, np.maximum(gw / opc.ell, 0.0), cfg.smooth_sweeps, cfg.smooth_ratio)
                 elif prev is None:
                     gc0 = bearing_guess(opc, cfg.bearing_area_min, cfg.bearing_area_max, cfg.bearing_tol)
                 else:
                     gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), cfg.smooth_sweeps,
-                                     cfg.smooth_omega)
+                                     cfg.smooth_ratio)
                 mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
                 gh, ph, _, inf = ncp_solve(opc, gc0, max(cfg.coarse_tol, tolerance), cfg.coarse_max_it, cfg,
                                            options, monitor=mon)
@@ -147,7 +147,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 prev = (opc, gh, ph)
             if prev is not None:
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
-                g0 = smooth_gap(op, g0, cfg.smooth_sweeps, cfg.smooth_omega)
+                g0 = smooth_gap(op, g0, cfg.smooth_sweeps, cfg.smooth_ratio)
             # the coarse levels' operators and fields are not needed by the fine solve: free them first
             # (at 4096^2 the N/2 level's alone is about 20 bytes a fine grid point)
             prev = opc = Hc = hc = gc0 = gh = ph = gw = None

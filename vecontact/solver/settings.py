@@ -122,9 +122,10 @@ class SolverSettings:
     coarse_tol: float = _knob(0.1, "convergence tolerance on the coarse grids (the fine one's if larger) [RESULTS.md]",
                               lo=0, hi=1, lo_open=True)
     coarse_max_it: int = _knob(50, "Newton iterations per coarse grid", lo=1)
-    smooth_sweeps: int = _knob(16, "projected-Jacobi sweeps after each prolongation [RESULTS.md]", lo=0)
-    smooth_omega: float = _knob(0.7, "their damping (< 2; every mode damped below ~60 deg loss angle)",
-                                lo=0, hi=2, lo_open=True)
+    smooth_sweeps: int = _knob(6, "projected Richardson sweeps after each prolongation (warmstart.smooth_gap) "
+                               "[RESULTS.md]", lo=0)
+    smooth_ratio: float = _knob(6.0, "... their steps: Chebyshev nodes of [max|m_q| / this, max|m_q|] [RESULTS.md]",
+                                lo=1)
     bearing_area_min: float = _knob(1e-4, "cold start: Persson's A/A0 estimate clipped to at least this",
                                     lo=0, hi=1, lo_open=True)
     bearing_area_max: float = _knob(0.9, "... and to at most this", lo=0, hi=1, lo_open=True)

@@ -175,12 +175,25 @@ def prolong_gap(src_op, ghat, phat, dst_op):
     return np.where(pi > dst_op.kappa * gi, 0.0, np.maximum(gi, 0.0))
 
 
-def smooth_gap(op, ghat, sweeps, omega):
-    """Projected-Jacobi smoothing of the NCP after a prolongation (one FFT pair per sweep):
-    g <- max(0, g - omega p(g) / m_max), m_max = max_q |m_q| (so every Fourier mode is damped,
-    |1 - omega m_q / m_max| < 1 for loss angles below ~60 degrees).  Removes the grid-scale errors of
-    the interpolated gap at the contact edges, so the first Newton step sees far fewer active-set
-    changes."""
+def chebyshev_nodes(lo, hi, n):
+    """The n Chebyshev nodes of [lo, hi], largest first: lambda_k = (hi + lo) / 2 + (hi - lo) / 2
+    cos(pi (2 k + 1) / (2 n)), k = 0 .. n - 1."""
+    k = np.arange(int(n))
+    return 0.5 * (hi + lo) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * k + 1) / (2 * int(n)))
+
+
+def smooth_gap(op, ghat, sweeps, ratio):
+    """Projected Richardson sweeps on the NCP after a prolongation (one FFT pair each), with Chebyshev
+    step sizes: g <- max(0, g - p(g) / lambda_k), k = 1 .. ``sweeps``, lambda_k the Chebyshev nodes of
+    [m_max / ``ratio``, m_max] (chebyshev_nodes), m_max = max_q |m_q| (nondimensional, sigma0 per h_rms).
+
+    Without contact a Fourier mode of the gap's error is multiplied by prod_k (1 - m_q / lambda_k): by at
+    most 1 / T_n((ratio + 1) / (ratio - 1)) (T_n the Chebyshev polynomial) for real m_q in [m_max / ratio,
+    m_max], the short waves the coarser grid could not carry.  So the grid-scale errors of the
+    interpolated gap at the contact edges are damped, and the first Newton step sees far fewer
+    active-set changes.  A viscoelastic m_q is complex, and the large steps can then grow some modes
+    (RESULTS.md); the Newton steps correct them.  The sweeps replaced session 17's 16 damped-Jacobi
+    sweeps (fewer FFT pairs for the same start; RESULTS.md, "`smooth_ratio`")."""
     fft = op.fft
     if sweeps <= 0:
         return ghat
@@ -189,8 +202,8 @@ def smooth_gap(op, ghat, sweeps, omega):
         return ghat
     g = np.array(ghat, dtype=float, copy=True)
     p = fft.real_array()
-    for _ in range(int(sweeps)):
+    for lam in chebyshev_nodes(mmax / ratio, mmax, sweeps):
         op.pressure(g, p)
-        g -= (omega / mmax) * p
+        g -= (1.0 / lam) * p
         np.maximum(g, 0.0, out=g)
     return g

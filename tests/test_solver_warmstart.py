@@ -1,0 +1,75 @@
+"""The smoothing after a prolongation (vecontact/solver/warmstart.smooth_gap): Chebyshev step sizes,
+checked against the Chebyshev polynomial's bound and, away from contact, against the closed form of
+the linear sweeps mode by mode (stiffness from tests/reference/dense.py, numpy FFTs)."""
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from reference.cases import L_PAPER, NU, small_spectrum
+from reference.dense import multiplier, random_surface
+
+from vecontact.core.pfft import SlabFFT
+from vecontact.physics.modulus import HavriliakNegami
+from vecontact.solver.operator import ContactOperator
+from vecontact.solver.warmstart import chebyshev_nodes, smooth_gap
+
+N = 24
+
+
+@pytest.mark.parametrize("n, ratio", [(1, 6.0), (4, 4.0), (6, 6.0), (9, 20.0)])
+def test_chebyshev_steps_damp_the_interval_by_the_chebyshev_bound(n, ratio):
+    # max over [lo, hi] of |prod_k (1 - x / lambda_k)| = 1 / T_n((hi + lo) / (hi - lo)), reached at the
+    # interval's ends (Chebyshev extrema), so sampling that includes them finds it to rounding
+    lo, hi = 1.0 / ratio, 1.0
+    lam = chebyshev_nodes(lo, hi, n)
+    assert lam.shape == (n,) and np.all(np.diff(lam) < 0) and lo < lam.min() and lam.max() < hi
+    x = np.linspace(lo, hi, 20001)
+    damping = np.abs(np.prod(1.0 - x[:, None] / lam[None, :], axis=1)).max()
+    bound = 1.0 / math.cosh(n * math.acosh((hi + lo) / (hi - lo)))
+    assert damping == pytest.approx(bound, rel=1e-9)
+    # below the interval nothing grows (the polynomial is 1 at 0 and monotone down to lo)
+    low = np.linspace(0.0, lo, 1001)
+    assert np.all(np.abs(np.prod(1.0 - low[:, None] / lam[None, :], axis=1)) <= 1.0 + 1e-12)
+
+
+@pytest.mark.parametrize("v", [1e-3, 1.0])
+def test_sweeps_away_from_contact_follow_the_closed_form(v):
+    # gap everywhere far above 0: no projection acts, and the sweeps g <- g - (1 + p_h + m g) / lambda_k
+    # multiply each Fourier mode q != 0 of g + D / m by prod_k (1 - m_q / lambda_k) (D the transform
+    # of 1 + p_h) and move the mean by -D_0 sum_k 1 / lambda_k
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=3)
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
+    op = ContactOperator(fft, L_PAPER, mod, v, 1e5, h)
+    m = multiplier(N, L_PAPER, mod, NU, v) * (op.ell / op.sigma0)      # sigma0 per h_rms, independent
+    mmax = np.abs(m).max()
+    assert op.stiffness_bounds()[1] == pytest.approx(mmax, rel=1e-12)
+    rng = np.random.default_rng(7)
+    g0 = 1e3 + rng.standard_normal((N, N))
+    sweeps, ratio = 6, 6.0
+    g = smooth_gap(op, g0, sweeps, ratio)
+    lam = chebyshev_nodes(mmax / ratio, mmax, sweeps)
+    D = np.fft.fftn(1.0 + op.p_h)
+    G0 = np.fft.fftn(g0)
+    nz = m != 0
+    G = np.empty_like(G0)
+    G[nz] = np.prod(1.0 - m[nz, None] / lam, axis=-1) * (G0[nz] + D[nz] / m[nz]) - D[nz] / m[nz]
+    G[~nz] = G0[~nz] - D[~nz] * np.sum(1.0 / lam)
+    expected = np.fft.ifftn(G).real
+    assert g.min() > 0.0                              # the projection never acted
+    assert np.abs(g - expected).max() <= 1e-9 * np.abs(g0).max()
+    # the sweeps changed the field by far more than that tolerance
+    assert np.abs(g - g0).max() > 1e-3
+
+
+def test_sweeps_keep_the_gap_nonnegative_and_do_nothing_when_asked_for_none():
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=5)
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
+    op = ContactOperator(fft, L_PAPER, mod, 0.01, 1e5, h)
+    g0 = np.maximum(op.hhat.max() - op.hhat, 0.0)      # a rigid flat touching the highest point
+    g = smooth_gap(op, g0, 6, 6.0)
+    assert g.min() == 0.0 and np.count_nonzero(g == 0.0) >= 1
+    assert smooth_gap(op, g0, 0, 6.0) is g0
