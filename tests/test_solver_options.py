@@ -67,6 +67,7 @@ def test_mapping_values():
     ("-vc_recycle_vectors 0", "removed with the Krylov recycling"),
     ("-vc_contact_step_large_n 4096", "removed: -vc_contact_step_area_large applies by the stiffness's range"),
     ({"vc_recycle_cost": 4}, "lost in wall time"),
+    ("-vc_smooth_omega 0.7", "Chebyshev steps now, -vc_smooth_ratio"),
 ])
 def test_errors_name_the_key(value, problem):
     """Bad options: an OptionError that is an InputError (one line, the caller's key) and a ValueError."""

@@ -42,6 +42,8 @@ RETIRED = {
     (f"{PREFIX}recycle_vectors", None): _RECYCLING,
     (f"{PREFIX}recycle_memory", None): _RECYCLING,
     (f"{PREFIX}recycle_cost", None): _RECYCLING,
+    (f"{PREFIX}smooth_omega", None): f"removed with the damped-Jacobi smoothing: its sweeps take Chebyshev "
+                                     f"steps now, -{PREFIX}smooth_ratio (benchmarks/RESULTS.md)",
 }
 
 
