@@ -18,6 +18,13 @@ from vecontact.solver.warmstart import chebyshev_nodes, smooth_gap
 N = 24
 
 
+def _operator(v, seed):
+    """The ContactOperator of a 24^2 paper-like surface under HN at ``v`` (m/s), 1e5 Pa, one rank."""
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=seed)
+    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
+    return ContactOperator(fft, L_PAPER, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU), v, 1e5, h)
+
+
 @pytest.mark.parametrize("n, ratio", [(1, 6.0), (4, 4.0), (6, 6.0), (9, 20.0)])
 def test_chebyshev_steps_damp_the_interval_by_the_chebyshev_bound(n, ratio):
     # max over [lo, hi] of |prod_k (1 - x / lambda_k)| = 1 / T_n((hi + lo) / (hi - lo)), reached at the
@@ -39,11 +46,8 @@ def test_sweeps_away_from_contact_follow_the_closed_form(v):
     # gap everywhere far above 0: no projection acts, and the sweeps g <- g - (1 + p_h + m g) / lambda_k
     # multiply each Fourier mode q != 0 of g + D / m by prod_k (1 - m_q / lambda_k) (D the transform
     # of 1 + p_h) and move the mean by -D_0 sum_k 1 / lambda_k
-    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
-    h = random_surface(N, L_PAPER, small_spectrum(N), seed=3)
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
-    op = ContactOperator(fft, L_PAPER, mod, v, 1e5, h)
-    m = multiplier(N, L_PAPER, mod, NU, v) * (op.ell / op.sigma0)      # sigma0 per h_rms, independent
+    op = _operator(v, seed=3)
+    m = multiplier(N, L_PAPER, op.modulus, NU, v) * (op.ell / op.sigma0)      # sigma0 per h_rms, independent
     mmax = np.abs(m).max()
     assert op.stiffness_bounds()[1] == pytest.approx(mmax, rel=1e-12)
     rng = np.random.default_rng(7)
@@ -65,10 +69,7 @@ def test_sweeps_away_from_contact_follow_the_closed_form(v):
 
 
 def test_sweeps_keep_the_gap_nonnegative_and_do_nothing_when_asked_for_none():
-    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
-    h = random_surface(N, L_PAPER, small_spectrum(N), seed=5)
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
-    op = ContactOperator(fft, L_PAPER, mod, 0.01, 1e5, h)
+    op = _operator(0.01, seed=5)
     g0 = np.maximum(op.hhat.max() - op.hhat, 0.0)      # a rigid flat touching the highest point
     g = smooth_gap(op, g0, 6, 6.0)
     assert g.min() == 0.0 and np.count_nonzero(g == 0.0) >= 1

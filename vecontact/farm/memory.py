@@ -35,7 +35,7 @@ def case_bytes(N, g, settings=None):
     contact-set steps' inner FGMRES (two vectors an iteration) over the largest contact set solved on
     (contact_step_area; all points with contact_step "contact").  That is their budgets (3 GB a rank
     by default), less where the restart caps bind, more where ``restart_min`` does.  Plus the kernel of
-    the contact-set steps' map of carried directions (recycle.py), N^2 float64 on every rank whatever
+    the contact-set steps' map of carried directions (recycle.py), N^2 float32 on every rank whatever
     ``g``, where it is made (within half of carry_memory)."""
     s = SolverSettings() if settings is None else settings
     n = float(N) * float(N) / max(1, int(g))
