@@ -39,7 +39,8 @@ from vecontact.solver import solve_contact
 
 N = 256
 Q0 = 2.5e5
-DOUBLE_KRYLOV = "-vc_changing_precision double -vc_cycle_precision double -vc_mixed_reduction_max 0"
+DOUBLE_KRYLOV = ("-vc_changing_precision double -vc_cycle_precision double -vc_mixed_reduction_max 0 "
+                 "-vc_single_exact_reduction_max 0")
 
 
 @pytest.mark.parametrize("sigma0, mode, area, bound", [(3e5, "contact", 0.194, 136.0), (2e6, "free", 0.881, 115.0)])

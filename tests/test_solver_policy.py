@@ -171,7 +171,7 @@ def test_mixed_steps():
     mixed_reduction_max: a changing step by 1 / rtol, an exact one by the latest measure over the
     tolerance; never float32-basis steps, never without a tolerance, never with the setting 0."""
     tol, top = 1e-8, S.mixed_reduction_max
-    p = StepPolicy(S, 1.0, tol=tol)
+    p = StepPolicy(SolverSettings(single_exact_reduction_max=0.0), 1.0, tol=tol)   # exact steps in PETSc
     p.record_residual(1.0)
     p.step(-1, "contact")
     assert p.single and not p.mixed                               # float32 basis: not a PETSc step
@@ -195,3 +195,27 @@ def test_mixed_steps():
         off.record_residual(tol)
         off.step(0, "free")
         assert not off.mixed
+
+
+@pytest.mark.parametrize("mode", ["contact", "free"])
+def test_exact_steps_single(mode):
+    """An exact step solves with a float32 basis (flexible, single.py) while it must cut its residual by
+    at most single_exact_reduction_max (the latest measure over the tolerance), else in PETSc with
+    mixed pairs or float64 ones; never on the free set once it cycles (the cycles' outer FGMRES keeps
+    a float64 basis), never with the setting 0, never without a tolerance."""
+    tol, top = 1e-8, S.single_exact_reduction_max
+    assert top == S.mixed_reduction_max
+    p = StepPolicy(S, 1.0, tol=tol)
+    p.record_residual(top * tol * 1.01)
+    p.step(0, mode)
+    assert not p.single and not p.mixed
+    p.record_residual(top * tol * 0.99)
+    p.step(0, mode)
+    assert p.single and not p.mixed
+    p.cycling = True
+    p.step(0, mode)
+    assert p.single == (mode == "contact") and p.mixed == (mode == "free")
+    for off in (StepPolicy(SolverSettings(single_exact_reduction_max=0.0), 1.0, tol=tol), StepPolicy(S, 1.0)):
+        off.record_residual(tol)
+        off.step(0, mode)
+        assert not off.single

@@ -62,6 +62,32 @@ def test_gcro_true_residual_and_fewer_iterations(restart):
     assert its["gcro"] < 0.8 * its["plain"], its
 
 
+def test_gcro_monitor_trial_is_the_answer():
+    """With carried directions (an exact step's GCRO start, carry.py) the monitor's trial solution
+    after k iterations holds the carried part too: bit for bit what the solve returns when stopped
+    there (restart 5: across restarts), and its true residual matches the estimate."""
+    A, B, b = _system(240, 7)
+    first = SingleGMRES(b.size, 200, _allsum, flexible=True, work=np.float64)
+    first.solve(*_ops(A, B), b, np.empty(b.size), 1e-4, 0.0, 500)
+    carried = _carried_basis(A, first.Z[:first.arnoldi[0]].astype(np.float64))
+    b2 = b + 0.3 * np.random.default_rng(1).standard_normal(b.size)
+    trials, ests = [], []
+
+    def monitor(its, res, build):
+        if its == 7:
+            trials.append(np.empty(b.size))
+            build(trials[-1])
+            ests.append(res)
+            return True
+        return False
+    x = np.empty(b.size)
+    its, est = SingleGMRES(b.size, 5, _allsum, flexible=True, work=np.float64).solve(
+        *_ops(A, B), b2, x, 1e-12, 0.0, 500, carried=carried, monitor=monitor)
+    assert its == 7 and np.array_equal(trials[0], x) and est == ests[0]
+    true = np.linalg.norm(b2 - A @ x)
+    assert abs(true - est) <= 1e-5 * np.linalg.norm(b2) and true < 0.5 * np.linalg.norm(b2)
+
+
 def test_gcro_starts_done_when_the_carried_space_holds_b():
     A, B, b = _system(120, 3)
     U = np.linalg.solve(A, b)[None, :]                  # A U = b: the carried space solves it

@@ -100,6 +100,37 @@ def test_single_gmres_flexible_same_iterations():
     assert np.linalg.norm(res[0][1] - res[1][1]) <= 1e-4 * np.linalg.norm(res[0][1])
 
 
+@pytest.mark.parametrize("restart", [200, 8])
+def test_single_gmres_monitor_builds_the_solution_it_stops_at(restart):
+    """The monitor (the measure stop of exact steps, measurestop.py) sees the start and every later
+    iteration; the trial solution it builds after 12 iterations is, bit for bit, what the solve returns
+    when stopped there, and what a solve capped at 12 iterations returns (restart 8: across a
+    restart, whose residual and solution carry over).  Bit-identity is the contract: the measure stop
+    keeps the trial iterate as the Newton iterate the solve's answer makes."""
+    A, B, b = _system(seed=7)
+    ref = np.empty_like(b)
+    its_ref, _ = SingleGMRES(b.size, restart, _allsum, flexible=True, work=np.float64).solve(
+        *_ops(A, B), b, ref, 1e-12, 0.0, 12)
+    seen, trials = [], []
+
+    def monitor(its, res, build):
+        seen.append((its, build is None))
+        if its == 12:
+            trials.append(np.full_like(b, np.nan))
+            build(trials[-1])
+            return True
+        return False
+    x = np.empty_like(b)
+    its, _ = SingleGMRES(b.size, restart, _allsum, flexible=True, work=np.float64).solve(
+        *_ops(A, B), b, x, 1e-12, 0.0, 300, monitor=monitor)
+    assert its == its_ref == 12
+    assert seen == [(0, True)] + [(k, False) for k in range(1, 13)]
+    assert np.array_equal(trials[0], x) and np.array_equal(x, ref)
+    assert np.linalg.norm(b - A @ x) < 0.5 * np.linalg.norm(b)         # a real partial solve
+    with pytest.raises(ValueError, match="flexible"):
+        SingleGMRES(b.size, restart, _allsum).solve(*_ops(A, B), b, x, 1e-12, 0.0, 300, monitor=monitor)
+
+
 def test_single_gmres_without_preconditioner_skips_only_a_copy():
     """``B`` None (the GMRES cycles): the basis vector goes to A as it is.  That only drops the copy an
     identity preconditioner makes, so iterations, residual estimates and solution are the same bit for
@@ -180,7 +211,7 @@ def test_single_gmres_subtract_in_blocks(monkeypatch):
 
 # double precision throughout: the reference of the float32 variants
 _DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0",
-           "vc_mixed_reduction_max": "0"}
+           "vc_mixed_reduction_max": "0", "vc_single_exact_reduction_max": "0"}
 
 
 def _solve(N, v, sigma0, options):
@@ -225,15 +256,31 @@ def test_single_steps_same_solution(sigma0, mode, range_max, mixed):
 
 @pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.1e5, "contact")])
 def test_petsc_steps_mixed_same_solution(sigma0, mode):
-    """The steps PETSc solves (here the exact ones) with mixed pairs in their operator
-    (mixed_reduction_max, default) against float64 pairs (0): the same solution and Newton steps; every
+    """The steps PETSc solves (here the exact ones: single_exact_reduction_max 0) with mixed pairs in
+    their operator (mixed_reduction_max, default) against float64 pairs (0): the same solution and Newton steps; every
     mixed pair is an iteration of such a step (one operator product each)."""
-    one, act1, _ = _solve(256, 10.0, sigma0, {})
-    two, act2, _ = _solve(256, 10.0, sigma0, {"vc_mixed_reduction_max": "0"})
+    petsc = {"vc_single_exact_reduction_max": "0"}
+    one, act1, _ = _solve(256, 10.0, sigma0, petsc)
+    two, act2, _ = _solve(256, 10.0, sigma0, dict(petsc, vc_mixed_reduction_max="0"))
     d1, d2 = one.diagnostics, two.diagnostics
     assert d1["step_modes"][-1][1] == mode
     petsc_its = one.linear_iterations - d1["single_iterations"]
     assert 0 < d1["mixed_pairs"] <= petsc_its and d2["mixed_pairs"] == 0
+    _same_path(one, act1, two, act2)
+
+
+@pytest.mark.parametrize("sigma0, mode", [(1.0e6, "free"), (1.1e5, "contact")])
+def test_exact_steps_single_same_solution(sigma0, mode):
+    """Exact steps with a float32 basis (single_exact_reduction_max, default) against PETSc's float64
+    one (0): the same solution and Newton steps; the exact step ran in single precision, flexible,
+    watched by the measure stop (its looks: the monitor of single.py)."""
+    one, act1, _ = _solve(256, 10.0, sigma0, {})
+    two, act2, _ = _solve(256, 10.0, sigma0, {"vc_single_exact_reduction_max": "0"})
+    d1, d2 = one.diagnostics, two.diagnostics
+    assert d1["step_modes"][-1][1] == mode
+    exact = np.diff(d1["linear_history"])[-1]          # the last step's Krylov iterations
+    assert d1["single_iterations"] - d2["single_iterations"] >= exact > 0
+    assert len(d1["measure_checks"]) >= 1
     _same_path(one, act1, two, act2)
 
 
@@ -286,12 +333,12 @@ def test_float32_preconditioner_pairs(sigma0, mode):
 
 
 def test_single_steps_only_where_allowed():
-    # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol:
-    # no float32 basis; no float32 pairs either without pc_range_max (preconditioners of FGMRES), and
+    # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol
+    # with exact steps in PETSc: no float32 basis; no float32 pairs either without pc_range_max (preconditioners of FGMRES), and
     # none with it where the user chose the Krylov methods (theirs need not be flexible)
     for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2", "vc_pc_range_max": "0"},
                     {"vc_single_rtol_min": "0.5", "vc_single_rtol_min_contact": "0.5", "vc_cycle_precision": "double",
-                     "vc_pc_range_max": "0"},
+                     "vc_pc_range_max": "0", "vc_single_exact_reduction_max": "0"},
                     {"ksp_type": "gmres", "contact_ksp_type": "fgmres", "vc_pc_range_max": "1e30"}):
         r, _, pairs = _solve(128, 10.0, 1.0e6, options)
         assert r.converged and pairs == 0, options

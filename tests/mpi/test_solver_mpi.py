@@ -199,7 +199,8 @@ def test_measure_stop_follows_the_step_vectors_collective(comm):
         x.destroy()
 
 
-_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0"}
+_DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "vc_pc_range_max": "0",
+           "vc_single_exact_reduction_max": "0"}
 _CYCLES = {"vc_changing_precision": "double", "vc_cycle_precision": "single", "vc_cycle_after_cap": "1",
            "vc_lin_maxit_changing": "10"}       # the first step uses its cap: cycles from the second on
 

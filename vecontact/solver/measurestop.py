@@ -3,7 +3,8 @@
 Once the active set stopped changing, the step's update is the solution (policy.py).  Its Krylov
 tolerance, atol = tol / kappa on the 2-norm of the step's residual, bounds the max-norm convergence
 measure (operator.py) from above, often by far: the solve would run on after its update already
-converged.  This KSP convergence test, run after PETSc's default one, builds the update of the
+converged.  This KSP convergence test, run after PETSc's default one (or a float32-basis solve's
+monitor, single.py, on the same terms), builds the update of the
 current Krylov iterate from time to time, evaluates the measure of the next Newton iterate g - x
 (one FFT pair, plus what building the update costs; on the contact set the update's pair gives the
 pressure too) and stops the solve when it is <= tol.  The next
@@ -43,8 +44,10 @@ class MeasureStop:
         self._rho = None
 
     def attach(self, step):
-        """Add the test to ``step``'s inner KSP, after PETSc's default one (once per step)."""
+        """Add the test to ``step``'s inner KSP, after PETSc's default one, and to its float32-basis
+        solves (``monitor``; once per step)."""
         step.ksp.addConvergenceTest(self, args=(step,))
+        step.stop = self
 
     def arm(self, measure):
         """Watch the next step's solve; ``measure``: the convergence measure of the current iterate."""
@@ -56,14 +59,26 @@ class MeasureStop:
         self.armed = False
 
     def __call__(self, ksp, its, rnorm, step):
+        return self.CONVERGED if self.look(its, rnorm, step, ksp.buildSolution) else self.ITERATING
+
+    def monitor(self, step):
+        """The test as a SingleGMRES monitor (single.py) of ``step``'s float32-basis solve, or None when
+        not armed."""
         if not self.armed:
-            return self.ITERATING
+            return None
+        return lambda its, res, build: self.look(its, res, step, build and (lambda y: build(y.getArray())))
+
+    def look(self, its, rnorm, step, build):
+        """True when the Krylov iterate of ``its`` iterations (residual 2-norm ``rnorm``) is a Newton
+        iterate that meets the test (then kept); ``build(y)`` writes the inner solution into the Vec y."""
+        if not self.armed:
+            return False
         scale = self.state.kappa * rnorm
         if its == 0:
             self._rho = self._measure / scale if scale > 0 else None
-            return self.ITERATING
+            return False
         if self._rho is None or self._rho * scale > self.tol:
-            return self.ITERATING
+            return False
         st = self.state
         if self._g is None:
             self._g = st.fft.real_array()
@@ -73,7 +88,7 @@ class MeasureStop:
                 self._y.destroy()
             self._y = step._y.duplicate()
             self._of = step._y
-        ksp.buildSolution(self._y)
+        build(self._y)
         ds = step.update(self._y, self._g)     # x, then g - x in place
         np.subtract(st.g, self._g, out=self._g)
         if ds is None:
@@ -85,8 +100,8 @@ class MeasureStop:
         self._rho = meas / scale if scale > 0 else None
         if meas <= self.tol:
             st.keep(self._g, self._p)
-            return self.CONVERGED
-        return self.ITERATING
+            return True
+        return False
 
     def release(self):
         if self._y is not None:

@@ -25,10 +25,14 @@ is at least the floor of its mode: single_rtol_min on the free set (tighter, a f
 next iterate less accurate), single_rtol_min_contact (0) on the contact set, whose flexible solve forms
 the solution from the preconditioned vectors, not from the float32 basis [RESULTS.md].
 
-A step PETSc solves (exact, or tightened below that floor) forms its operator's products with a float32
-backward transform (``mixed``, subset.Mixed) while it must cut its residual by at most
-mixed_reduction_max (``mixed_reduction``): such a solve stalls near 1e-7 of its start (the float32
-rounding of A z), and the Newton residual that judges it is formed in float64.
+An exact step solves with a float32 basis too, flexible (FGMRES: the solution formed from the
+preconditioned vectors; on the free set as well), while it must cut its residual by at most
+single_exact_reduction_max (``mixed_reduction``), except on the free set once it cycles; the measure
+stop watches it as it watches PETSc's solves.  A step PETSc solves (the other exact ones, or tightened
+below that floor) forms its operator's products with a float32 backward transform (``mixed``,
+subset.Mixed) while it must cut its residual by at most mixed_reduction_max: such a solve stalls near
+1e-7 of its start (the float32 rounding of A z), and the Newton residual that judges it is formed in
+float64.
 
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of an iteration
 cap of at least SolverSettings.cycle_cap (a tightened cap; the first one on grids of high stiffness
@@ -127,7 +131,11 @@ class StepPolicy:
         if change == 0:
             cap = s.cycle_max_it if self.cycling and mode == "free" else s.ksp_max_it
             self._last = (mode, change, cap)
-            self.mixed = self.mixed_reduction(None) <= s.mixed_reduction_max
+            reduction = self.mixed_reduction(None)
+            # not inside the free set's cycles, whose outer FGMRES keeps its basis in float64
+            self.single = (0 < s.single_exact_reduction_max and reduction <= s.single_exact_reduction_max
+                           and not (self.cycling and mode == "free"))
+            self.mixed = not self.single and reduction <= s.mixed_reduction_max
             return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
         cap = min(s.ksp_max_it, self.maxit_changing)

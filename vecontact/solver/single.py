@@ -1,10 +1,13 @@
 """Restarted GMRES with a single-precision Krylov basis, for the Newton steps whose active set still
-changes.
+changes, and (flexible) for the exact ones.
 
 A changing step only needs its Krylov residual cut by lin_rtol (policy.py), far above float32
 rounding (6e-8); free-set steps tightened below SolverSettings.single_rtol_min (1e-2) run in double,
 where a float32 basis left the next iterate less accurate (the contact set's flexible steps form
 their solution from the preconditioned vectors and keep the float32 basis: single_rtol_min_contact).
+An exact step runs here, flexible on either set, while it must cut its residual by at most
+single_exact_reduction_max (1e5, a hundredth of float32's 1/eps); the measure stop (measurestop.py)
+watches it through ``solve``'s monitor, whose trial solutions are the ones the solve would return.
 The step's two costs are memory-bound: the classical Gram-Schmidt over the basis, and the FFT pairs
 of the operator and of the preconditioner.  The basis is a float32 block streamed by BLAS sgemv: half
 the bytes (its products summed in float64 over chunks, _dots).  The pairs can run in float32 too
@@ -127,7 +130,30 @@ class SingleGMRES:
         x += cr.astype(x.dtype) @ carried.U
         return r
 
-    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None):
+    @staticmethod
+    def _coefficients(k, H, g, s):
+        """y of the update x += Z y (H_k y = g_k, upper triangular after the rotations), for the
+        unnormalised rows (scales s)."""
+        y = np.zeros(k)
+        for i in range(k - 1, -1, -1):
+            y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
+        return y / s[:k]
+
+    def _add_flexible(self, x, y, E, carried):
+        """x += Z_k y - U E_k y (FGMRES's update, GCRO's carried part too); self.z is its scratch."""
+        k = y.size
+        if E is not None:
+            x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
+        z = self.z
+        np.dot(y.astype(z.dtype), self.Z[:k], out=z)
+        x += z
+
+    def _trial(self, out, x, k, H, g, s, E, carried):
+        """``out`` = the solution after the first k iterations of the running cycle (monitor's build)."""
+        np.copyto(out, x, casting="same_kind")
+        self._add_flexible(out, self._coefficients(k, H, g, s), E, carried)
+
+    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None, monitor=None):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
         (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
         estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy).
@@ -136,11 +162,18 @@ class SingleGMRES:
         orthonormal).  The solve starts from x = U C^T b, every product is kept orthogonal to C (its
         coefficients E), and the update is x += Z y - U E y; the residual estimate stays exact.
 
+        ``monitor(its, res, build)`` (``flexible`` only), called at the start (its 0, build None) and after
+        every iteration that did not end the solve: True ends it there.  ``build(out)`` writes the solution of the iterations so far into
+        the float64 array ``out`` (what the solve would return; the measure stop, measurestop.py).
+        Collective: ``res`` is the same on every rank, so must the answer be.
+
         The basis is kept unnormalised: row i holds s_i v_i, v_i the orthonormal Arnoldi vector and
         s_i = |row i| (float64, s_0 = 1), so the operator's product, written into the next row, is
         orthogonalised in place and never divided by its norm (a pass over the vector saved; the
         scales enter the few Gram-Schmidt coefficients, H and y instead).  A row whose scale leaves
         [2^-_RANGE, 2^_RANGE] is multiplied by a power of two, which rounds nothing."""
+        if monitor is not None and not (self.flexible and B is not None):
+            raise ValueError("SingleGMRES.solve: a monitor needs the flexible method (its trial solution)")
         V, z = self.V, self.z
         x[...] = 0.0
         r = b
@@ -160,6 +193,8 @@ class SingleGMRES:
                 return 0, res
         else:
             carried = None
+        if monitor is not None:
+            monitor(0, res, None)                          # the start (no solution to build yet)
         while True:
             beta = self._norm(r) if its else res
             np.multiply(r, 1.0 / beta, out=V[0], casting="same_kind")
@@ -205,6 +240,8 @@ class SingleGMRES:
                 self.history.append(res)
                 s[k] = tn
                 done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
+                if not done and monitor is not None:
+                    done = bool(monitor(its, res, lambda out, k=k: self._trial(out, x, k, H, g, s, E, carried)))
                 if done:
                     break
                 e = math.frexp(tn)[1]
@@ -213,21 +250,18 @@ class SingleGMRES:
                     s[k] = math.ldexp(tn, -e)
                     self.rescales += 1
             # x += B (V_k y),  H_k y = g_k (upper triangular after the rotations); row k is free
-            y = np.zeros(k)
-            for i in range(k - 1, -1, -1):
-                y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
-            y /= s[:k]
+            y = self._coefficients(k, H, g, s)
             if E is not None:
-                x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
                 self.projected = E[:, :k]
             if self.flexible and B is not None:
-                np.dot(y.astype(z.dtype), self.Z[:k], out=z)
-                x += z
+                self._add_flexible(x, y, E, carried)
                 # row i of V is s_i v_i, Z[j] = s_j B v_j and A B v_j = sum_i Hraw[i, j] v_i
                 # (a happy breakdown leaves row k zero: s_k = 0, and its G row stays 0)
                 ratio = np.divide(s[:k], s[:k + 1, None], out=np.zeros((k + 1, k)), where=s[:k + 1, None] > 0)
                 self.arnoldi = (k, Hraw[:k + 1, :k] * ratio)
             else:
+                if E is not None:
+                    x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
                 t = V[k]
                 np.dot(y.astype(np.float32), V[:k], out=t)
                 if B is None:

@@ -19,7 +19,8 @@ the contact set (SolverSettings.contact_step / contact_step_area), and how tight
   its compliance; vectors of (1 - A/A0) N^2 entries, 2 FFT pairs per inner iteration.
 The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py); an
 exact step's solve also ends as soon as its update meets the convergence test (measurestop.py); a
-changing step solves with a float32 Krylov basis (single.py, SolverSettings.changing_precision);
+changing step solves with a float32 Krylov basis (single.py, SolverSettings.changing_precision), an
+exact one too near the solution (single_exact_reduction_max);
 ``-snes_ksp_ew`` or any ``-ksp_``/``-contact_ksp_`` rtol, atol or max_it in the options hand them to
 PETSc instead.  Convergence is decided by our own scale-free test (operator.py), installed with
 SNESSetConvergenceTest.  ``-snes_type vinewtonrsls`` selects PETSc's reduced-space VI method (vi.py).
@@ -124,7 +125,7 @@ class _Semismooth:
         if self.policy.cycling and mode == "free":
             step.start_cycles()
         if tolerances is not None:
-            step.set_tolerances(*tolerances, single=self.policy.single, mixed=self.policy.mixed)
+            step.set_tolerances(*tolerances, single=self.policy.single, mixed=self.policy.mixed, flexible=change == 0)
         if self.stop is not None and change == 0:
             self.stop.arm(self.policy.residuals[-1])
         elif self.stop is not None:

@@ -310,6 +310,8 @@ class SubsetStep:
         self._unchanged = False         # the next solve's set is the last solve's (carry)
         self.removed = 0.0              # the mean the operator's P took off its last product (ContactSetStep)
         self.carried = None             # the directions the running PETSc solve starts from (carry.py)
+        self.flexible = False           # the next float32-basis solve keeps its preconditioned vectors (set_tolerances)
+        self.stop = None                # the MeasureStop attached to this step, if any (measurestop.py)
 
     def activate(self, ksp):
         """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
@@ -318,13 +320,16 @@ class SubsetStep:
         ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
 
-    def set_tolerances(self, rtol, atol, max_it, single=False, mixed=False):
+    def set_tolerances(self, rtol, atol, max_it, single=False, mixed=False, flexible=False):
         """``max_it`` counts Krylov iterations; nested (``cycle`` > 1), whole cycles of the outer KSP.
         ``single``: solve in single precision (single.py) with these tolerances instead of the KSP;
-        ``mixed``: else the KSP's operator with mixed pairs (_krylov_grid)."""
+        ``mixed``: else the KSP's operator with mixed pairs (_krylov_grid); ``flexible``: the
+        single-precision solve as FGMRES (always on the contact set), which forms its solution from
+        the preconditioned vectors and lets the measure stop build trial solutions (an exact step)."""
         self.ksp.setTolerances(rtol=rtol, atol=atol, max_it=-(-max_it // self.cycle))
         # not when the user chose the Krylov method (-ksp_type / -contact_ksp_type): theirs runs
         self.single = bool(single) and self.own_krylov()
+        self.flexible = self.mode == "contact" or bool(flexible)
         self.mixed = bool(mixed) and not self.single
         self._tolerances = (rtol, atol, max_it)
         if not self.single and self._single is not None:
@@ -510,14 +515,14 @@ class SubsetStep:
         # preconditioned one in the work precision
         fgmres_vectors = (4 + np.dtype(sg.work).itemsize) / 8
         if k == 1:
-            vectors = fgmres_vectors if self.mode == "contact" else 0.5
+            vectors = fgmres_vectors if self.flexible else 0.5
             restart = self.comm.allreduce(self.settings.single_restart(n_loc, self.mode, vectors), op=MPI.MIN)
             if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
             if space is not None and not self._unchanged:
                 space = self.map_space(space)
             basis = space.basis(self.fft, self.n_S, self.settings.carry_drop) if space is not None else None
-            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.mode == "contact")
+            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible)
             A, means = sg.A.matvec, None
             if gm.flexible and self.settings.carry_directions > 0:
                 means = []                      # what P took off each product: the raw products (recycle.py)
@@ -525,7 +530,8 @@ class SubsetStep:
                 def A(z, out, product=sg.A.matvec):
                     product(z, out)
                     means.append(self.removed)
-            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis)
+            monitor = self.stop.monitor(self) if self.stop is not None and gm.flexible else None
+            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis, monitor=monitor)
             if means is not None:               # its directions, for the next step (carry.py, recycle.py)
                 self._carry_from = (gm, means, basis, space, self.idx)
             if basis is not None:
