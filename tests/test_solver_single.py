@@ -334,8 +334,9 @@ def test_float32_preconditioner_pairs(sigma0, mode):
 
 def test_single_steps_only_where_allowed():
     # the user's own Krylov tolerances (POLICY_OFF) or methods, and a floor above every changing rtol
-    # with exact steps in PETSc: no float32 basis; no float32 pairs either without pc_range_max (preconditioners of FGMRES), and
-    # none with it where the user chose the Krylov methods (theirs need not be flexible)
+    # with exact steps in PETSc: no float32 basis; no float32 pairs either without pc_range_max
+    # (preconditioners of FGMRES), and none with it where the user chose the Krylov methods (theirs need
+    # not be flexible)
     for options in ({"ksp_rtol": "1e-2", "contact_ksp_rtol": "1e-2", "vc_pc_range_max": "0"},
                     {"vc_single_rtol_min": "0.5", "vc_single_rtol_min_contact": "0.5", "vc_cycle_precision": "double",
                      "vc_pc_range_max": "0", "vc_single_exact_reduction_max": "0"},

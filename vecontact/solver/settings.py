@@ -95,9 +95,9 @@ class SolverSettings:
     mixed_reduction_max: float = _knob(1e5, "the steps PETSc solves (exact, tightened) form their operator with a "
                                        "float32 backward transform (subset.Mixed) while they must cut their "
                                        "residual by at most this (0: never) [RESULTS.md]", lo=0)
-    single_exact_reduction_max: float = _knob(1e5, "exact contact-set steps solve with a float32 basis (single.py, "
-                                              "flexible) while they must cut their residual by at most this "
-                                              "(0: never) [RESULTS.md]", lo=0)
+    single_exact_reduction_max: float = _knob(1e5, "exact steps (not in the free set's cycles) solve with a float32 "
+                                              "basis (single.py, flexible) while they must cut their residual by "
+                                              "at most this (0: never) [RESULTS.md]", lo=0)
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
                                  "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
                                  choices=("single", "double"))

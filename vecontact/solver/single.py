@@ -162,10 +162,11 @@ class SingleGMRES:
         orthonormal).  The solve starts from x = U C^T b, every product is kept orthogonal to C (its
         coefficients E), and the update is x += Z y - U E y; the residual estimate stays exact.
 
-        ``monitor(its, res, build)`` (``flexible`` only), called at the start (its 0, build None) and after
-        every iteration that did not end the solve: True ends it there.  ``build(out)`` writes the solution of the iterations so far into
-        the float64 array ``out`` (what the solve would return; the measure stop, measurestop.py).
-        Collective: ``res`` is the same on every rank, so must the answer be.
+        ``monitor(its, res, build)`` (``flexible`` only), called at the start (its 0, build None) and
+        after every iteration that did not end the solve: True ends it there.  ``build(out)`` writes the
+        solution of the iterations so far into the float64 array ``out``, bit for bit what the solve
+        returns if it ends there (the measure stop, measurestop.py).  Collective: ``res`` is the same on
+        every rank, so must the answer be.
 
         The basis is kept unnormalised: row i holds s_i v_i, v_i the orthonormal Arnoldi vector and
         s_i = |row i| (float64, s_0 = 1), so the operator's product, written into the next row, is
