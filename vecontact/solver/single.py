@@ -139,19 +139,25 @@ class SingleGMRES:
             y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:]) / H[i, i]
         return y / s[:k]
 
-    def _add_flexible(self, x, y, E, carried):
-        """x += Z_k y - U E_k y (FGMRES's update, GCRO's carried part too); self.z is its scratch."""
-        k = y.size
+    @staticmethod
+    def _subtract_carried(x, y, E, carried):
+        """x -= U E_k y (GCRO's carried part of the update; nothing without carried directions)."""
         if E is not None:
-            x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
+            x -= (E[:, :y.size] @ y).astype(x.dtype) @ carried.U
+
+    def _add_flexible(self, x, y):
+        """x += Z_k y (FGMRES's update); self.z is its scratch."""
         z = self.z
-        np.dot(y.astype(z.dtype), self.Z[:k], out=z)
+        np.dot(y.astype(z.dtype), self.Z[:y.size], out=z)
         x += z
 
     def _trial(self, out, x, k, H, g, s, E, carried):
-        """``out`` = the solution after the first k iterations of the running cycle (monitor's build)."""
+        """``out`` = the solution after the first k iterations of the running cycle (monitor's build),
+        formed as the solve forms its own."""
         np.copyto(out, x, casting="same_kind")
-        self._add_flexible(out, self._coefficients(k, H, g, s), E, carried)
+        y = self._coefficients(k, H, g, s)
+        self._subtract_carried(out, y, E, carried)
+        self._add_flexible(out, y)
 
     def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None, monitor=None):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
@@ -252,17 +258,16 @@ class SingleGMRES:
                     self.rescales += 1
             # x += B (V_k y),  H_k y = g_k (upper triangular after the rotations); row k is free
             y = self._coefficients(k, H, g, s)
+            self._subtract_carried(x, y, E, carried)
             if E is not None:
                 self.projected = E[:, :k]
             if self.flexible and B is not None:
-                self._add_flexible(x, y, E, carried)
+                self._add_flexible(x, y)
                 # row i of V is s_i v_i, Z[j] = s_j B v_j and A B v_j = sum_i Hraw[i, j] v_i
                 # (a happy breakdown leaves row k zero: s_k = 0, and its G row stays 0)
                 ratio = np.divide(s[:k], s[:k + 1, None], out=np.zeros((k + 1, k)), where=s[:k + 1, None] > 0)
                 self.arnoldi = (k, Hraw[:k + 1, :k] * ratio)
             else:
-                if E is not None:
-                    x -= (E[:, :k] @ y).astype(x.dtype) @ carried.U
                 t = V[k]
                 np.dot(y.astype(np.float32), V[:k], out=t)
                 if B is None:
