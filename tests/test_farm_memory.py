@@ -28,10 +28,14 @@ def test_case_bytes_covers_the_measured_peaks():
     carry = 4 * n                                          # the map's kernel (float32), within carry_memory / 2
     basis = (memory.case_bytes(4096, 1) - memory.BYTES_PER_POINT * n - carry) / memory.KRYLOV_PEAK
     assert 3e9 - 2 * 8 * 0.3 * n <= basis <= 3e9
-    # a small budget: restart_min binds, the free-set GMRES holds 11 whole-grid vectors (1.5 GB)
+    # a small budget: restart_min binds, the free-set GMRES holds 11 whole-grid vectors (1.5 GB), the
+    # contact-set steps' inner FGMRES 2 x 11 on up to contact_step_area_small (60 %) of them (1.8 GB)
     small = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9)
     basis = (memory.case_bytes(4096, 1, small) - memory.BYTES_PER_POINT * n - carry) / memory.KRYLOV_PEAK
-    assert basis == pytest.approx(8 * (small.restart_min + 1) * n, rel=1e-12)
+    assert basis == pytest.approx(8 * 2 * (small.restart_min + 1) * 0.6 * n, rel=1e-12)
+    off = SolverSettings(restart_memory=1e9, inner_restart_memory=1e9, contact_step_min_n=8192)
+    basis = (memory.case_bytes(4096, 1, off) - memory.BYTES_PER_POINT * n - carry) / memory.KRYLOV_PEAK
+    assert basis == pytest.approx(8 * (off.restart_min + 1) * n, rel=1e-12)
     # a small grid: the caps bind, the free-set GMRES's 121 vectors on every point outweigh the inner
     # FGMRES's 2 x 101 on the 30 % of them solved on the contact set; with contact-set steps
     # everywhere the inner FGMRES holds 2 x 101 whole-grid vectors

@@ -4,7 +4,8 @@
   to float32 rounding, with restarts and with rows rescaled by powers of two;
 * the solver on a paper surface at 10 m/s, ``-vc_carry_map_cost 0`` against ``-vc_carry_directions 0``: the same Newton
   path and answer, the exact step started from the carried directions and took fewer Krylov
-  iterations and FFT pairs.
+  iterations and FFT pairs;
+* above ``-vc_carry_area_max`` the contact-set steps carry nothing: the path of ``-vc_carry_directions 0``.
 """
 import numpy as np
 import pytest
@@ -64,3 +65,18 @@ def test_exact_step_carries_the_last_steps_directions(exact):
     assert abs(on.mu / off.mu - 1) <= 1e-6, (on.mu, off.mu)
     # the carried directions cost no FFT pair and are not counted as iterations
     assert on.linear_iterations < off.linear_iterations and on.fft_pairs < off.fft_pairs
+
+
+def test_no_carry_above_carry_area_max():
+    """The same case with carry_area_max below its A/A0 (7.6 %): the contact-set steps neither keep nor
+    start from directions, the solve of carry_directions 0 to the FFT pair; at 0.3 (the default) they
+    carry."""
+    gated, act_gated = paper_contact_solve({"vc_carry_area_max": "0.05"})
+    off, act_off = paper_contact_solve({"vc_carry_directions": "0"})
+    on, _ = paper_contact_solve({})
+    assert gated.converged and off.converged and max(gated.residual, off.residual) <= 1e-8
+    assert gated.diagnostics["step_modes"][-1][1] == "contact" and 0.05 < gated.area <= 0.3
+    assert gated.diagnostics["carried_directions"] == 0 < on.diagnostics["carried_directions"]
+    assert gated.diagnostics["linear_history"] == off.diagnostics["linear_history"]
+    assert gated.fft_pairs == off.fft_pairs and np.array_equal(act_gated, act_off)
+    assert abs(gated.mu / off.mu - 1) <= 1e-12, (gated.mu, off.mu)

@@ -112,12 +112,20 @@ def test_settings_check_their_ranges():
 
 def test_step_area_by_stiffness_range():
     """contact_step_area_large where the stiffness range exceeds contact_step_range_max (the paper's
-    compound: 2.9e5 at 4096^2 and 1 m/s, 5.9e5 at 2048^2 and 100 m/s, 7.3e5 at 4096^2 and 10 m/s)."""
+    compound: 2.9e5 at 4096^2 and 1 m/s, 5.9e5 at 2048^2 and 100 m/s, 7.3e5 at 4096^2 and 10 m/s);
+    contact_step_area_small where it is at most contact_step_range_min on grids of at least
+    contact_step_min_n (4.6e3 at 1024^2 and 0.01 m/s, 3.45e4 at 4096^2 and 0.01 m/s; not 4.0e4 at 512^2
+    and 10 m/s, nor 1.08e5 at 1024^2 and 10 m/s)."""
     s = SolverSettings()
     assert (s.contact_step_area, s.contact_step_area_large, s.contact_step_range_max) == (0.3, 0.2, 4e5)
-    assert s.step_area(1.0) == s.step_area(2.9e5) == s.step_area(4e5) == 0.3
-    assert s.step_area(4.0001e5) == s.step_area(5.9e5) == s.step_area(7.3e5) == 0.2
-    assert SolverSettings(contact_step_range_max=1e6).step_area(7.3e5) == 0.3
+    assert (s.contact_step_area_small, s.contact_step_range_min, s.contact_step_min_n) == (0.6, 5e4, 1024)
+    assert s.step_area(5.0001e4, 4096) == s.step_area(2.9e5, 4096) == s.step_area(4e5, 4096) == 0.3
+    assert s.step_area(1.0, 512) == s.step_area(4.0e4, 512) == s.step_area(1.08e5, 1024) == 0.3
+    assert s.step_area(4.0001e5, 1024) == s.step_area(5.9e5, 2048) == s.step_area(7.3e5, 4096) == 0.2
+    assert s.step_area(1.0, 1024) == s.step_area(4.6e3, 1024) == s.step_area(3.45e4, 4096) == 0.6
+    assert s.step_area(5e4, 2048) == 0.6
+    assert SolverSettings(contact_step_range_max=1e6).step_area(7.3e5, 4096) == 0.3
+    assert SolverSettings(contact_step_min_n=512).step_area(4.0e4, 512) == 0.6
 
 
 def test_cycle_cap_by_stiffness_range():

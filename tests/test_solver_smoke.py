@@ -205,6 +205,29 @@ def test_step_area_large_applies_by_the_operators_stiffness_range():
     assert abs(below.area - above.area) <= 1.0 / N ** 2 and abs(below.mu - above.mu) <= 1e-6 * above.mu
 
 
+def test_step_area_small_applies_by_grid_size_and_stiffness_range():
+    """contact_step_area_small (1 here: contact-set steps at any area) where the solve's own operator has
+    a stiffness range of at most contact_step_range_min on a grid of at least contact_step_min_n; the
+    solution is the same either way."""
+    from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.settings import SolverSettings
+    problem = _step_mode_problem()
+    fft, L, h, mod, v = problem
+    N, sigma0 = fft.N, 1e4
+    stiffness_range = ContactOperator(fft, L, mod, v, sigma0, h).stiffness_range()
+
+    def run(range_min, min_n):
+        return _solve_step_modes(problem, sigma0, vc_contact_step_area_small=1.0,
+                                 vc_contact_step_range_min=range_min, vc_contact_step_min_n=min_n)
+
+    low, modes_low = run(1.01 * stiffness_range, N)
+    high, modes_high = run(0.99 * stiffness_range, N)
+    small, modes_small = run(1.01 * stiffness_range, N + 1)
+    assert high.area > SolverSettings().contact_step_area
+    assert modes_low == {"contact"} and modes_high == {"free"} and modes_small == {"free"}
+    assert abs(low.area - high.area) <= 1.0 / N ** 2 and abs(low.mu - high.mu) <= 1e-6 * high.mu
+
+
 def test_ksp_options_reach_the_free_set_steps():
     """-ksp_* options reach the inner GMRES of the free-set steps (it has the solver's own prefix):
     -ksp_max_it 3 caps every step at 3 inner iterations, where the steps take more without it."""

@@ -26,7 +26,8 @@ A changing step's inner solve starts from the last step's directions, their prod
 set with c's kernel columns of the points that changed (recycle.py, SolverSettings.carry_map_cost;
 GCRO in single.py).  An exact step, whose set is the last step's, needs no map: its FGMRES starts from
 the last step's directions and their products, known without an FFT pair (carry.py,
-SolverSettings.carry_directions).
+SolverSettings.carry_directions).  Neither while C has more than carry_area_max of the grid's points
+(``carries``).
 
 Cost per Newton step: 2 FFT pairs + 2 per inner Krylov iteration (A and B), one more where carried
 directions are mapped, and one pair per grid and solve for each of the edge correction's and the map's
@@ -113,6 +114,12 @@ class ContactSetStep(SubsetStep):
         g.product_of(self.idx, np.ones(self.idx.size), self.op.c, 1.0)       # c 1_C: one pair
         ones_product = gather(g.out, self.idx, np.empty(self.idx.size))
         return space.mapped(self.fft, self.idx, self.n_S, self._kernel, ones_product)
+
+    def carries(self):
+        """... and the contact set has at most carry_area_max of the grid's points (n_S is global: the
+        same on every rank): the carry's passes over K vectors of the set grow with it, and above 30 %
+        they cost more than the iterations they save [RESULTS.md]."""
+        return super().carries() and self.n_S <= self.settings.carry_area_max * float(self.fft.N) ** 2
 
     def release(self):
         super().release()

@@ -66,6 +66,12 @@ class SolverSettings:
                                            "[RESULTS.md]", lo=0, hi=1)
     contact_step_range_max: float = _knob(4e5, "stiffness range above which contact_step_area_large applies "
                                           "[RESULTS.md]", lo=0)
+    contact_step_area_small: float = _knob(0.6, "auto: the same on grids of N >= contact_step_min_n where "
+                                           "max|m_q|/min|m_q| <= contact_step_range_min [RESULTS.md]", lo=0, hi=1)
+    contact_step_range_min: float = _knob(5e4, "stiffness range up to which contact_step_area_small applies "
+                                          "[RESULTS.md]", lo=0)
+    contact_step_min_n: int = _knob(1024, "... on grids of at least this size (below it a contact-set step's own "
+                                    "work per iteration outweighs the FFT pairs it saves) [RESULTS.md]", lo=1)
     # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
     restart_max: int = _knob(120, "GMRES restart of the free-set steps (-ksp_gmres_restart wins) [RESULTS.md]",
                              lo=1)
@@ -110,6 +116,9 @@ class SolverSettings:
     carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
                                   "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
+    carry_area_max: float = _knob(0.3, "... only while the contact set has at most this fraction of the grid "
+                                  "(larger: the passes over its K vectors cost more than they save) [RESULTS.md]",
+                                  lo=0, hi=1)
     carry_map_cost: float = _knob(10.0, "a changing contact-set step starts from the last step's K directions, "
                                   "mapped to its set (recycle.py), when |C| x (points changed + 2 K) <= this x N^2 "
                                   "(about that many FFT pairs; 0: never) [RESULTS.md]", lo=0)
@@ -145,12 +154,16 @@ class SolverSettings:
             raise ValueError(f"bearing_area_min {self.bearing_area_min} > bearing_area_max {self.bearing_area_max}")
 
     # ------------------------------------------------------------------ derived values
-    def step_area(self, stiffness_range):
-        """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set of a grid whose
-        stiffness has the range max|m_q|/min|m_q| (ContactOperator.stiffness_range; it grows with N
-        and with the speed): at high range the contact set wanders between the steps solved on it."""
+    def step_area(self, stiffness_range, n):
+        """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set of an n x n grid
+        whose stiffness has the range max|m_q|/min|m_q| (ContactOperator.stiffness_range; it grows with
+        N and with the speed): at high range the contact set wanders between the steps solved on it; at
+        low range on large grids the contact-set steps take fewer FFT pairs than the free set's at any
+        area, and their own work per iteration (edge correction, halos) weighs little beside a pair."""
         if stiffness_range > self.contact_step_range_max:
             return self.contact_step_area_large
+        if stiffness_range <= self.contact_step_range_min and n >= self.contact_step_min_n:
+            return self.contact_step_area_small
         return self.contact_step_area
 
     def cycle_cap(self, stiffness_range):

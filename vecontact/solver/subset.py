@@ -398,6 +398,11 @@ class SubsetStep:
         class: no map).  Collective."""
         return None
 
+    def carries(self):
+        """Whether the solves on the current set keep their directions for the next step and start from
+        the last step's (carry.py, recycle.py): carry_directions > 0.  The same on every rank."""
+        return self.settings.carry_directions > 0
+
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
         if self.single:
@@ -437,7 +442,7 @@ class SubsetStep:
         """The directions of the last solve (recycle.CarriedSpace, on its set), or None; its memory is
         let go of.  Collective: every rank keeps the same number."""
         pending, self._carry_from = self._carry_from, None
-        if pending is None or pending[0].arnoldi is None:
+        if pending is None or pending[0].arnoldi is None or not self.carries():
             return None
         gm, means, basis, older, idx = pending
         st = self.settings
@@ -524,7 +529,7 @@ class SubsetStep:
             basis = space.basis(self.fft, self.n_S, self.settings.carry_drop) if space is not None else None
             gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible)
             A, means = sg.A.matvec, None
-            if gm.flexible and self.settings.carry_directions > 0:
+            if gm.flexible and self.carries():
                 means = []                      # what P took off each product: the raw products (recycle.py)
 
                 def A(z, out, product=sg.A.matvec):
