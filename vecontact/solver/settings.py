@@ -166,6 +166,11 @@ class SolverSettings:
             return self.contact_step_area_small
         return self.contact_step_area
 
+    def widest_step_area(self, n):
+        """The largest A/A0 step_area gives an n x n grid at any stiffness range (the contact set a
+        contact-set step may be solved on, whatever the speed: farm.memory)."""
+        return max(self.step_area(r, n) for r in (0.0, self.contact_step_range_max, math.inf))
+
     def cycle_cap(self, stiffness_range):
         """The smallest iteration cap whose exhaustion by a changing free-set step starts the cycles
         (StepPolicy.record_iterations) on a grid whose stiffness has the range max|m_q|/min|m_q|: the
