@@ -76,3 +76,26 @@ def test_contact_set_steps_save_one_pair_each(v, sigma0, monkeypatch):
     assert np.array_equal(act_on, act_off)
     assert on.mu == pytest.approx(off.mu, rel=1e-12)
     assert off.fft_pairs_by_level[256] - on.fft_pairs_by_level[256] == on.iterations
+
+
+def test_measures_are_their_definitions():
+    """ContactOperator.measures (passes in one scratch, operator.py) against the definitions written
+    out with temporaries: complementarity max |min(p^, kappa g^)| and penetration max(0, max -g^) bit
+    for bit (the same roundings), the force |mean(p^ on C) - 1| to 1e-14 (its sum is ordered
+    differently: a few roundings of O(max|p^|) terms over N^2); with the default C = {p^ >= kappa g^}
+    and a given one.  The scratch is reused: the inputs are left as they were."""
+    op = _operator()
+    rng = np.random.default_rng(7)
+    g = rng.standard_normal(op.fft.local_real_shape)
+    p = 1.0 + rng.standard_normal(op.fft.local_real_shape)
+    g0, p0 = g.copy(), p.copy()
+    for act in (None, rng.random(g.shape) < 0.3):
+        C = p >= op.kappa * g if act is None else act
+        comp, pen, force = op.measures(g, p, act)
+        assert comp == float(np.abs(np.minimum(p, op.kappa * g)).max())
+        assert pen == max(float((-g).max()), 0.0)
+        want = abs(float(np.sum(p, where=C)) / g.size - 1.0)
+        assert abs(force - want) <= 1e-14 * float(np.abs(p).max())
+        assert np.array_equal(g, g0) and np.array_equal(p, p0)
+    # no penetration: the measure is 0, not the largest gap's negative
+    assert op.measures(np.abs(g) + 0.5, p)[1] == 0.0

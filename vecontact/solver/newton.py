@@ -80,7 +80,7 @@ class NewtonState:
         compressed point is taken if no point qualifies).  Returns how many points changed since the
         previous call, -1 on the first."""
         comm = self.comm
-        act = self.p >= self.kappa * self.g
+        act = self.p >= self.op.kappa_gap(self.g)
         nact = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
         if nact == 0:
             val = self.p - self.kappa * self.g
@@ -98,7 +98,7 @@ class NewtonState:
 
     def contact_set(self):
         """{p^ >= kappa g^} of the cached iterate (local rows): the returned solution's contact set."""
-        return self.p >= self.kappa * self.g
+        return self.p >= self.op.kappa_gap(self.g)
 
     def measures(self, act=None):
         """(complementarity, penetration, force) of the cached iterate (operator.py), all ranks; ``act``

@@ -103,6 +103,7 @@ class ContactOperator:
         M *= self.ell / self.sigma0
         self.m = M
         self._stiffness_bounds = None
+        self._work = None       # whole-grid scratch of the measures and the active set (``work``)
         with np.errstate(divide="ignore", invalid="ignore"):
             c = np.where(absM > 0, 1.0 / np.where(absM > 0, self.m, 1.0), 0.0)
         self.c = np.ascontiguousarray(c)
@@ -167,19 +168,33 @@ class ContactOperator:
         out += 1.0
         return out
 
+    @property
+    def work(self):
+        """A real whole-grid scratch (local rows, made on first use), for passes over the grid that
+        would otherwise allocate a temporary each call: its contents last until the next user."""
+        if self._work is None:
+            self._work = self.fft.real_array()
+        return self._work
+
+    def kappa_gap(self, ghat):
+        """kappa g^ in ``work`` (the active set is {p^ >= kappa g^})."""
+        return np.multiply(ghat, self.kappa, out=self.work)
+
     def measures(self, ghat, phat, active=None):
         """(complementarity, penetration, force) of the iterate (ghat, p^(ghat)), identical on all ranks.
 
         ``active``: bool mask of the contact set used to clean the returned pressure (default
-        p^ >= kappa g^)."""
+        p^ >= kappa g^).  Three passes over the grid in ``work``, no temporaries (RESULTS.md, "The
+        measures' passes")."""
+        kg = self.kappa_gap(ghat)
         if active is None:
-            active = phat >= self.kappa * ghat
-        comp = np.abs(np.minimum(phat, self.kappa * ghat))
-        cmax = float(comp.max()) if comp.size else 0.0
-        pen = float((-ghat).max()) if ghat.size else 0.0
+            active = phat >= kg
+        comp = np.minimum(phat, kg, out=kg)               # |min(p^, kappa g^)|, by its extremes
+        cmax = max(float(comp.max()), -float(comp.min())) if comp.size else 0.0
+        pen = -float(ghat.min()) if ghat.size else 0.0
         pen = max(pen, 0.0)
         # force balance of the returned (cleaned) pressure: mean(p^ on the active set) - 1
-        tot = self.fft.sum(np.sum(phat, where=active))
+        tot = self.fft.sum(np.sum(np.multiply(phat, active, out=self.work)))
         force = abs(tot / float(self.N) ** 2 - 1.0)
         buf = np.array([cmax, pen])
         out = np.empty(2)

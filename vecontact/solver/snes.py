@@ -103,7 +103,8 @@ class _Semismooth:
     def residual(self, snes, X, F):
         st = self.state
         st.ensure(st.view(X))
-        np.minimum(st.g, st.p / st.kappa, out=st.view(F, readonly=False))
+        out = np.divide(st.p, st.kappa, out=st.view(F, readonly=False))    # no temporary
+        np.minimum(st.g, out, out=out)
 
     def jacobian(self, snes, X, J, P):
         st = self.state
