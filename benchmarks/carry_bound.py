@@ -46,21 +46,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-Q0 = 2.5e5
-
-
-def paper_case(N, seed=1, comm=None, planner="estimate"):
-    """The SlabFFT (on ``comm``, default 1 rank), period, surface and modulus of benchmarks/solver.py's
-    cases."""
-    from mpi4py import MPI
-    from vecontact.core.pfft import SlabFFT
-    from vecontact.core.surface import generate
-    from vecontact.physics.modulus import HavriliakNegami
-    from vecontact.physics.spectrum import SelfAffine
-    L = 2 * math.pi / Q0
-    fft = SlabFFT(MPI.COMM_SELF if comm is None else comm, N, planner=planner)
-    h = generate(fft, L, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), seed)
-    return fft, L, h, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import paper_case  # noqa: E402  (benchmarks/: the study's surfaces and compound)
 
 
 def record_steps(fft, L, h, modulus, velocity, sigma0, mode="free"):
@@ -232,7 +219,7 @@ def bound_rows(n, velocity, sigma0, carries, window=-1, mode="free"):
     (exact products only: c's kernel decays as 1/r, no window holds it)."""
     if mode == "contact" and window >= 0:
         raise ValueError("--window: the contact-set steps' operator c has no local kernel")
-    fft, L, h, modulus = paper_case(n)
+    fft, L, h, modulus = paper_case.case(n)
     result, steps = record_steps(fft, L, h, modulus, velocity, sigma0, mode)
     rows = []
     if not steps:
@@ -326,7 +313,7 @@ def map_cost(args):
     from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
     from vecontact.solver.settings import SolverSettings
     comm = MPI.COMM_WORLD
-    fft, L, h, modulus = paper_case(args.n, comm=comm, planner="measure")
+    fft, L, h, modulus = paper_case.case(args.n, comm=comm, planner="measure")
     x, y = fft.real_array(), fft.real_array()
     ones = np.ones(fft.local_fourier_shape, dtype=fft.complex_dtype)
     pair = _median_ms(comm, lambda: fft.apply(x, ones, y))

@@ -7,7 +7,7 @@ Usage (from the repository root):
                                 [--repeat 3] [--no-oracle]
 
 Starts its own MPI runs (``mpiexec -n RANKS python benchmarks/solver.py --worker N ...``), one per grid
-size, on the paper's surfaces (docs/conventions.md §2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
+size, on the paper's surfaces (jobs/paper.yaml's, benchmarks/paper_case.py; docs/conventions.md §2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
 C0 = 1.0616e-28 m^4, q1 = N/16 q0, i.e. N = 512, 1024, 2048, 4096 for q1 = 32..256 q0, seed 1) with the
 reference Havriliak-Negami compound at v = 0.01 and 10 m/s, nominal pressures aimed at A/A0 ~ 1 %, 5 %,
 30 % (Persson's theory, corrected by one cheap coarse-grid solve on the N/4 grid, which holds all the
@@ -61,7 +61,6 @@ from statistics import median
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-Q0 = 2.5e5
 
 
 
@@ -69,13 +68,10 @@ Q0 = 2.5e5
 # ------------------------------------------------------------------------------------------ worker
 def worker(args):
     sys.path.insert(0, ROOT)
-    import numpy as np
     from mpi4py import MPI
     from scipy.special import erfinv
+    import paper_case
     from vecontact.core.pfft import SlabFFT, apply_seconds
-    from vecontact.core.surface import generate
-    from vecontact.physics.modulus import Elastic, HavriliakNegami
-    from vecontact.physics.spectrum import SelfAffine
     from vecontact.physics.theory import persson
     from vecontact.solver import SolverSettings, solve_contact
     from vecontact.solver.contactset import oracle_solve
@@ -85,13 +81,13 @@ def worker(args):
 
     comm = MPI.COMM_WORLD
     N = args.n
-    L = 2 * math.pi / Q0
-    spec = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
-    hn = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
-    el = Elastic(3e6, 0.5)
+    L = paper_case.period()
+    spec = paper_case.spectrum(N)
+    hn = paper_case.compound()
+    el = paper_case.elastic()
     t0 = time.perf_counter()
     fft = SlabFFT(comm, N, planner=args.planner)
-    h = generate(fft, L, spec, args.seed)
+    h = paper_case.surface(fft, args.seed)
     t_setup = time.perf_counter() - t0
     # FFTW plans every SlabFFT a solve at N uses (the coarse grids', the float32 twins) before the clock,
     # as the fine grid's above: else the first case's seconds carry them (0.2-0.4 s at 1024^2, a tenth of

@@ -11,23 +11,23 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from vecontact.physics.modulus import HavriliakNegami  # noqa: E402
-from vecontact.physics.spectrum import SelfAffine  # noqa: E402
+import paper_case  # noqa: E402  (benchmarks/: the study's spectra and compound)
+from vecontact.cases import spectrum_for  # noqa: E402
 from vecontact.physics.theory import persson  # noqa: E402
 
-Q0 = 2.5e5                     # 1/m
-C0 = 1.0616e-28                # m^4
-Q1_OVER_Q0 = (32, 64, 128, 256)
-VELOCITIES = np.array([0.01, 0.1, 1.0, 10.0])                 # m/s
 PRESSURES = np.geomspace(1e3, 1e7, 50)                        # Pa: A/A0 ~0.5 %..60 % on every curve
 REPEATS = 5
 
 
 def run_grid():
-    modulus = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
-    return [(k, persson(SelfAffine(Q0, 4 * Q0, k * Q0, 0.8, C0), modulus, VELOCITIES, PRESSURES))
-            for k in Q1_OVER_Q0]
+    """[(q1/q0, Persson's result at the job's velocities and PRESSURES)] for each q1 of jobs/paper.yaml."""
+    job = paper_case.job()
+    s, velocities = job.surface, np.asarray(job.sweep.velocity, dtype=float)
+    modulus = paper_case.compound()
+    return [(round(q1 / s.q0), velocities, persson(spectrum_for(job, q1), modulus, velocities, PRESSURES))
+            for q1 in s.q1]
 
 
 def main():
@@ -37,11 +37,11 @@ def main():
         results = run_grid()
         best = min(best, time.perf_counter() - start)
     print(f"pressures: {len(PRESSURES)} log-spaced, {PRESSURES[0]:.3g}..{PRESSURES[-1]:.3g} Pa; "
-          f"HN compound (E0 3 MPa, Einf 3 GPa, alpha = beta = 0.5, tau 1e-10 s), nu = 0.5")
+          f"{paper_case.compound().describe()}")
     print(f"{'q1/q0':>6} {'v (m/s)':>8} {'A/A0 min':>10} {'A/A0 max':>10} {'mu min':>10} {'mu max':>10}"
           f" {'xi':>8} {'nodes':>6}")
-    for k, res in results:
-        for i, v in enumerate(VELOCITIES):
+    for k, velocities, res in results:
+        for i, v in enumerate(velocities):
             print(f"{k:>6d} {v:>8g} {res.area[i].min():>10.4g} {res.area[i].max():>10.4g} "
                   f"{res.mu[i].min():>10.4g} {res.mu[i].max():>10.4g} {res.xi[i]:>8.4g} {res.q.size:>6d}")
     print(json.dumps({"seconds": round(best, 6)}))
