@@ -7,13 +7,14 @@ Usage (from the repository root):
                                 [--repeat 3] [--no-oracle]
 
 Starts its own MPI runs (``mpiexec -n RANKS python benchmarks/solver.py --worker N ...``), one per grid
-size, on the paper's surfaces (jobs/paper.yaml's, benchmarks/paper_case.py; docs/conventions.md §2: q0 = 2.5e5 1/m, qr = 4 q0, H = 0.8,
-C0 = 1.0616e-28 m^4, q1 = N/16 q0, i.e. N = 512, 1024, 2048, 4096 for q1 = 32..256 q0, seed 1) with the
-reference Havriliak-Negami compound at v = 0.01 and 10 m/s, nominal pressures aimed at A/A0 ~ 1 %, 5 %,
-30 % (Persson's theory, corrected by one cheap coarse-grid solve on the N/4 grid, which holds all the
-roughness; the A/A0 actually reached is reported).  Next to every viscoelastic solve the worker runs
-Polonsky-Keer on the elastic problem (E = E0) on the same surface, aimed at the same A/A0, and times
-the raw distributed FFT pair (SlabFFT.apply) of the same grid and rank count.
+size, on the paper's surfaces (jobs/paper.yaml's, benchmarks/paper_case.py; docs/conventions.md §2: q0 =
+2.5e5 1/m, qr = 4 q0, H = 0.8, C0 = 1.0616e-28 m^4, q1 = N/16 q0, i.e. N = 512, 1024, 2048, 4096 for q1
+= 32..256 q0, seed 1) with the reference Havriliak-Negami compound at v = 0.01 and 10 m/s, nominal
+pressures aimed at A/A0 ~ 1 %, 5 %, 30 % (Persson's theory, corrected by one cheap coarse-grid solve on
+the N/4 grid, which holds all the roughness; the A/A0 actually reached is reported).  Next to every
+viscoelastic solve the worker runs Polonsky-Keer on the elastic problem (E = E0) on the same surface,
+aimed at the same A/A0, and times the raw distributed FFT pair (SlabFFT.apply) of the same grid and rank
+count.
 
 Output: a table, then as LAST line one JSON object:
   pk_ratio_max         max over N >= 1024 of (our FFT pairs) / (PK FFT pairs), same N and target A/A0
