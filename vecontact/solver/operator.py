@@ -194,7 +194,7 @@ class ContactOperator:
         pen = -float(ghat.min()) if ghat.size else 0.0
         pen = max(pen, 0.0)
         # force balance of the returned (cleaned) pressure: mean(p^ on the active set) - 1
-        tot = self.fft.sum(np.sum(np.multiply(phat, active, out=self.work)))
+        tot = self.fft.sum(np.multiply(phat, active, out=self.work))
         force = abs(tot / float(self.N) ** 2 - 1.0)
         buf = np.array([cmax, pen])
         out = np.empty(2)
