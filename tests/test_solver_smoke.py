@@ -205,27 +205,50 @@ def test_step_area_large_applies_by_the_operators_stiffness_range():
     assert abs(below.area - above.area) <= 1.0 / N ** 2 and abs(below.mu - above.mu) <= 1e-6 * above.mu
 
 
-def test_step_area_small_applies_by_grid_size_and_stiffness_range():
+def test_step_area_small_applies_by_grid_size_and_modulus_range():
     """contact_step_area_small (1 here: contact-set steps at any area) where the solve's own operator has
-    a stiffness range of at most contact_step_range_min on a grid of at least contact_step_min_n; the
-    solution is the same either way."""
+    a modulus range max|E|/min|E| of at most contact_step_modulus_max on a grid of at least
+    contact_step_min_n, whatever its stiffness range up to contact_step_range_max; the solution is the
+    same either way."""
     from vecontact.solver.operator import ContactOperator
     from vecontact.solver.settings import SolverSettings
     problem = _step_mode_problem()
     fft, L, h, mod, v = problem
     N, sigma0 = fft.N, 1e4
-    stiffness_range = ContactOperator(fft, L, mod, v, sigma0, h).stiffness_range()
+    op = ContactOperator(fft, L, mod, v, sigma0, h)
+    modulus_range, stiffness_range = op.modulus_range(), op.stiffness_range()
+    # a viscoelastic range, well below the stiffness's (which holds the grid's q range too)
+    assert 1.5 < modulus_range < stiffness_range / 10.0
+    assert stiffness_range < SolverSettings().contact_step_range_max
 
-    def run(range_min, min_n):
+    def run(modulus_max, min_n):
         return _solve_step_modes(problem, sigma0, vc_contact_step_area_small=1.0,
-                                 vc_contact_step_range_min=range_min, vc_contact_step_min_n=min_n)
+                                 vc_contact_step_modulus_max=modulus_max, vc_contact_step_min_n=min_n)
 
-    low, modes_low = run(1.01 * stiffness_range, N)
-    high, modes_high = run(0.99 * stiffness_range, N)
-    small, modes_small = run(1.01 * stiffness_range, N + 1)
+    low, modes_low = run(1.01 * modulus_range, N)
+    high, modes_high = run(0.99 * modulus_range, N)
+    small, modes_small = run(1.01 * modulus_range, N + 1)
     assert high.area > SolverSettings().contact_step_area
     assert modes_low == {"contact"} and modes_high == {"free"} and modes_small == {"free"}
     assert abs(low.area - high.area) <= 1.0 / N ** 2 and abs(low.mu - high.mu) <= 1e-6 * high.mu
+
+
+def test_modulus_range_is_the_rubbers_spread_over_the_grids_frequencies():
+    """ContactOperator.modulus_range = max|E(q_x v)| / min|E(q_x v)| over the grid's q_x: 1 at rest and
+    for an elastic solid; at speed, the same as numpy's on E's values at the grid's q_x (docs/
+    conventions.md §4: omega = q_x v) and growing with v towards Einf / E0 (1000 here)."""
+    from vecontact.solver.operator import ContactOperator
+    fft, L, h, mod, v = _step_mode_problem()
+    assert ContactOperator(fft, L, mod, 0.0, 1e4, h).modulus_range() == pytest.approx(1.0, abs=1e-12)
+    assert ContactOperator(fft, L, Elastic(3e6, 0.5), 5.0, 1e4, h).modulus_range() == pytest.approx(1.0, abs=1e-12)
+    qx = 2.0 * np.pi / L * np.fft.fftfreq(fft.N, 1.0 / fft.N)
+    ranges = []
+    for speed in (1e-3, 1.0, 1e3):
+        E = np.abs(np.asarray(mod(qx * speed), dtype=complex))
+        got = ContactOperator(fft, L, mod, speed, 1e4, h).modulus_range()
+        assert got == pytest.approx(E.max() / E.min(), rel=1e-12)
+        ranges.append(got)
+    assert 1.0 < ranges[0] < ranges[1] < ranges[2] <= 1000.0 * (1.0 + 1e-9)
 
 
 def test_ksp_options_reach_the_free_set_steps():

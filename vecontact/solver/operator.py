@@ -146,9 +146,17 @@ class ContactOperator:
     def stiffness_range(self):
         """max |m_q| / min |m_q| over the grid's q != 0 (collective on the first call): how far float32
         rounding of a gap is amplified by the stiffness (single.py), and how ill-conditioned the
-        contact-set steps are (SolverSettings.step_area)."""
+        contact-set steps are (SolverSettings.step_area, with modulus_range)."""
         lo, hi = self.stiffness_bounds()
         return hi / lo if hi > 0 else 1.0
+
+    def modulus_range(self):
+        """max |E(q_x v)| / min |E(q_x v)| over the grid's q_x (1 for an elastic solid or at rest; no
+        communication: every rank holds all q_x): how much of the stiffness's range is the rubber's,
+        not the grid's, hence how far the contact set wanders between Newton steps solved on it
+        (SolverSettings.step_area)."""
+        a = np.abs(self.E)
+        return float(a.max() / a.min())
 
     # ------------------------------------------------------------------ nondimensional maps
     def compliance_response(self):

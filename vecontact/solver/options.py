@@ -37,6 +37,9 @@ RETIRED = {
                                  f"above -{PREFIX}contact_step_range_max)",
     (f"{PREFIX}contact_step_large_n", None): f"removed: -{PREFIX}contact_step_area_large applies by the "
                                              f"stiffness's range, -{PREFIX}contact_step_range_max",
+    (f"{PREFIX}contact_step_range_min", None): f"replaced by -{PREFIX}contact_step_modulus_max (60): "
+                                               f"contact_step_area_small applies by the range of |E(q_x v)|, "
+                                               f"not of the stiffness (benchmarks/RESULTS.md)",
     ("snes_type", "vinewtonssls"): "removed (it did not converge with the compliance preconditioner); "
                                    "use the default newtonls or vinewtonrsls",
     (f"{PREFIX}recycle_vectors", None): _RECYCLING,
