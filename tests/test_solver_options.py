@@ -116,7 +116,8 @@ def test_step_area_by_stiffness_and_modulus_range():
     contact_step_area_small where the modulus range is at most contact_step_modulus_max on grids of at
     least contact_step_min_n.  The paper's compound, (stiffness range, modulus range) by N and v:
     512^2 10 m/s (4.02e4, 111); 1024^2 0.01 m/s (4.6e3, 6.37), 1 m/s (3.9e4, 54), 10 m/s (1.08e5, 149);
-    2048^2 0.1 m/s (3.67e4, 25.3), 1 m/s (1.07e5, 74.2), 100 m/s (5.9e5, -); 4096^2 0.01 m/s (3.45e4,
+    2048^2 0.1 m/s (3.67e4, 25.3), 1 m/s (1.07e5, 74.2), 100 m/s (5.9e5: above contact_step_range_max,
+    whatever its modulus range); 4096^2 0.01 m/s (3.45e4,
     11.9), 0.1 m/s (1.02e5, 35.2), 1 m/s (2.93e5, 101), 10 m/s (7.31e5, 253) [RESULTS.md]."""
     s = SolverSettings()
     assert (s.contact_step_area, s.contact_step_area_large, s.contact_step_range_max) == (0.3, 0.2, 4e5)
@@ -128,6 +129,7 @@ def test_step_area_by_stiffness_and_modulus_range():
     assert s.step_area(3.45e4, 11.9, 4096) == s.step_area(1.02e5, 35.2, 4096) == s.step_area(4e5, 60.0, 8192) == 0.6
     assert SolverSettings(contact_step_range_max=1e6).step_area(7.31e5, 253, 4096) == 0.3
     assert SolverSettings(contact_step_min_n=512).step_area(4.02e4, 40.0, 512) == 0.6
+    assert SolverSettings(contact_step_modulus_max=0.0).step_area(1.0, 1.0, 4096) == 0.3
     assert s.widest_step_area(4096) == 0.6 and s.widest_step_area(512) == 0.3
 
 

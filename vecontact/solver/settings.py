@@ -69,7 +69,7 @@ class SolverSettings:
     contact_step_area_small: float = _knob(0.6, "auto: the same on grids of N >= contact_step_min_n where "
                                            "max|E|/min|E| <= contact_step_modulus_max [RESULTS.md]", lo=0, hi=1)
     contact_step_modulus_max: float = _knob(60.0, "range of |E(q_x v)| over the grid up to which "
-                                            "contact_step_area_small applies [RESULTS.md]", lo=1)
+                                            "contact_step_area_small applies (below 1: never) [RESULTS.md]", lo=0)
     contact_step_min_n: int = _knob(1024, "... on grids of at least this size (below it a contact-set step's own "
                                     "work per iteration outweighs the FFT pairs it saves) [RESULTS.md]", lo=1)
     # --- GMRES restarts: the cap, unless the basis would exceed the memory budget
