@@ -131,6 +131,45 @@ def test_single_gmres_monitor_builds_the_solution_it_stops_at(restart):
         SingleGMRES(b.size, restart, _allsum).solve(*_ops(A, B), b, x, 1e-12, 0.0, 300, monitor=monitor)
 
 
+def test_single_gmres_restarts_a_stalled_cycle():
+    """``stall``: a cycle whose estimate is below the reduction and fell by less than half over the
+    window restarts from the true residual.  On the dense system below a float32 basis loses its
+    orthogonality near 2e-5 of |b|: without the rule the estimate crawls on while the true residual
+    stands still, and a solve to 1e-5 returns a residual 4.6 times its tolerance (a solve to 1e-6
+    learns it only at the restart after 200 iterations); with it both meet their tolerance by the true
+    residual, the second in about half the iterations.  A solve that never stalls (to 1e-4) is
+    untouched, bit for bit."""
+    A, B, b = _system(seed=7)
+    nb = np.linalg.norm(b)
+
+    def solve(rtol, stall):
+        x = np.empty_like(b)
+        gm = SingleGMRES(b.size, 200, _allsum, flexible=True, work=np.float64)
+        its, est = gm.solve(*_ops(A, B), b, x, rtol, 0.0, 400, stall=stall)
+        return its, x, gm.stalls, np.linalg.norm(b - A @ x)
+
+    rule = (1e-4, 10)
+    plain, ruled = solve(1e-4, None), solve(1e-4, rule)
+    assert ruled[2] == 0 and plain[0] == ruled[0] and np.array_equal(plain[1], ruled[1])
+    assert solve(1e-5, None)[3] > 2 * 1e-5 * nb                        # the estimate lied
+    for rtol in (1e-5, 1e-6):
+        its, _, stalls, true = solve(rtol, rule)
+        assert stalls >= 1 and true <= 1.05 * rtol * nb, (rtol, its, stalls, true / nb)
+    assert solve(1e-6, rule)[0] < 0.7 * solve(1e-6, None)[0]
+    # a genuine plateau (a cyclic shift: the estimate stands at |b| until the n-th iteration) restarts
+    # after every window + 1 iterations, from b - A x
+    n = 40
+    shift = np.roll(np.eye(n), 1, axis=0)
+    e0 = np.zeros(n)
+    e0[0] = 1.0
+    for window in (3, 5):
+        gm = SingleGMRES(n, 30, _allsum, flexible=True, work=np.float64)
+        x = np.empty(n)
+        its, est = gm.solve(*_ops(shift, np.eye(n)), e0, x, 1e-6, 0.0, 24, stall=(1.0, window))
+        assert its == 24 and gm.stalls == 24 // (window + 1) - (24 % (window + 1) == 0)
+        assert est == pytest.approx(np.linalg.norm(e0 - shift @ x), rel=1e-12)
+
+
 def test_single_gmres_without_preconditioner_skips_only_a_copy():
     """``B`` None (the GMRES cycles): the basis vector goes to A as it is.  That only drops the copy an
     identity preconditioner makes, so iterations, residual estimates and solution are the same bit for

@@ -195,7 +195,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          single_iterations=int(info.get("single_iterations", 0)),
                          float32_pairs=bool(info.get("float32_pairs", False)),
                          mixed_pairs=int(info.get("mixed_pairs", 0)),
-                         carried_directions=int(info.get("carried_directions", 0))),
+                         carried_directions=int(info.get("carried_directions", 0)),
+                         stalls=int(info.get("stalls", 0))),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,

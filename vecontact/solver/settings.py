@@ -104,6 +104,10 @@ class SolverSettings:
     single_exact_reduction_max: float = _knob(1e5, "exact steps (not in the free set's cycles) solve with a float32 "
                                               "basis (single.py, flexible) while they must cut their residual by "
                                               "at most this (0: never) [RESULTS.md]", lo=0)
+    single_stall_reduction: float = _knob(1e-4, "a float32-basis step's cycle (single.py) restarts from its float64 "
+                                          "residual once its estimate is below this x the cycle's start and "
+                                          "stalls (0: never) [RESULTS.md]", lo=0, hi=1)
+    single_stall_window: int = _knob(10, "... stalls: fell by less than half over this many iterations", lo=1)
     cycle_precision: str = _knob("single", "single: the GMRES cycles of long free-set solves (free_cycle) with a float32 "
                                  "basis under PETSc's float64 FGMRES (subset.SingleCycles) [RESULTS.md]",
                                  choices=("single", "double"))

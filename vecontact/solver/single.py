@@ -21,7 +21,9 @@ The method is PETSc's KSPGMRES (or, ``flexible``, KSPFGMRES) with right precondi
 classical Gram-Schmidt without refinement, and its default test (||r|| <= max(rtol ||b||, atol), at
 least ``min_it`` iterations), so the steps stop where PETSc's did.  The small Hessenberg problem and
 every global sum are float64 (the sums bitwise identical on all ranks, SlabFFT._allsum).  At a restart
-the residual is recomputed from the float64 right-hand side.  The solution is accumulated in float64.
+the residual is recomputed from the float64 right-hand side, and a cycle whose estimate stalls deep
+in its solve restarts early (``solve``'s ``stall``: the float32 basis has lost its orthogonality and
+the estimate no longer follows the true residual).  The solution is accumulated in float64.
 """
 from __future__ import annotations
 
@@ -93,6 +95,7 @@ class SingleGMRES:
         self.z = work_store[:n]
         self.Z = work_store[n:(m + 1) * n].reshape(m, n) if flexible else None
         self.rescales = 0     # basis rows rescaled by a power of two (solve), over all solves
+        self.stalls = 0       # cycles restarted on a stalled estimate (solve's ``stall``), over all solves
         self.history = []     # residual estimates of the last solve, one per iteration (and ||b|| first)
         self.arnoldi = None   # (k, G) of the last cycle: A Z[j] = sum_i G[i, j] V[i] (+ C E; flexible; carry.py)
         self.projected = None  # E (carried x k) of the last cycle: C^T A Z[j] (GCRO, solve's ``carried``)
@@ -159,7 +162,7 @@ class SingleGMRES:
         self._subtract_carried(out, y, E, carried)
         self._add_flexible(out, y)
 
-    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None, monitor=None):
+    def solve(self, A, B, b, x, rtol, atol, max_it, min_it=1, carried=None, monitor=None, stall=None):
         """Solve A B u = b, x = B u (right preconditioning) from x = 0.  ``b``: right-hand side
         (n_loc); ``x``: output (n_loc, of the work dtype or float64).  Returns (iterations, residual
         estimate).  ``B`` None: no preconditioner (the basis vector itself goes to A, not a copy).
@@ -173,6 +176,11 @@ class SingleGMRES:
         solution of the iterations so far into the float64 array ``out``, bit for bit what the solve
         returns if it ends there (the measure stop, measurestop.py).  Collective: ``res`` is the same on
         every rank, so must the answer be.
+
+        ``stall``: (reduction, window) or None.  A cycle whose residual estimate is below ``reduction``
+        times its start and fell by less than half over the last ``window`` iterations restarts (from
+        the float64 residual of b): that deep, a float32 basis has lost its orthogonality and the
+        estimate crawls while the true residual stands still [RESULTS.md].
 
         The basis is kept unnormalised: row i holds s_i v_i, v_i the orthonormal Arnoldi vector and
         s_i = |row i| (float64, s_0 = 1), so the operator's product, written into the next row, is
@@ -213,6 +221,7 @@ class SingleGMRES:
             g = np.zeros(m + 1)
             g[0] = beta
             s = np.ones(m + 1)
+            start = len(self.history) - 1              # the cycle's first estimate in history
             k = 0
             while k < m:
                 if B is None:
@@ -249,7 +258,9 @@ class SingleGMRES:
                 done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
                 if not done and monitor is not None:
                     done = bool(monitor(its, res, lambda out, k=k: self._trial(out, x, k, H, g, s, E, carried)))
-                if done:
+                if done or (stall is not None and k > stall[1] and res <= stall[0] * beta
+                            and self.history[start + k - stall[1]] < 2.0 * res):
+                    self.stalls += not done
                     break
                 e = math.frexp(tn)[1]
                 if abs(e) > _RANGE:

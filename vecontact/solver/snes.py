@@ -152,7 +152,8 @@ class _Semismooth:
                     single_iterations=sum(s.single_iterations for s in self.steps.values()),
                     float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()),
                     mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()),
-                    carried_directions=sum(s.carried_directions for s in self.steps.values()))
+                    carried_directions=sum(s.carried_directions for s in self.steps.values()),
+                    stalls=sum(s.stalls for s in self.steps.values()))
 
     def release(self):
         for step in self.steps.values():

@@ -296,6 +296,7 @@ class SubsetStep:
         self.single_iterations = 0      # ... of them with a float32 basis (single.py)
         self.mixed_pairs = 0            # pairs with one transform in float32 (Mixed)
         self.carried_directions = 0     # directions exact solves started from (carry.py), no pair each
+        self.stalls = 0                 # float32-basis cycles restarted on a stalled estimate (single.py)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
         self._A = self._b = self._y = self._A_ctx = None
@@ -536,7 +537,10 @@ class SubsetStep:
                     product(z, out)
                     means.append(self.removed)
             monitor = self.stop.monitor(self) if self.stop is not None and gm.flexible else None
-            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis, monitor=monitor)
+            st = self.settings
+            stall = (st.single_stall_reduction, st.single_stall_window) if st.single_stall_reduction > 0 else None
+            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis, monitor=monitor, stall=stall)
+            self.stalls += gm.stalls
             if means is not None:               # its directions, for the next step (carry.py, recycle.py)
                 self._carry_from = (gm, means, basis, space, self.idx)
             if basis is not None:
