@@ -179,6 +179,13 @@ class SolverSettings:
         return max(self.step_area(r, e, n) for r in (0.0, self.contact_step_range_max, math.inf)
                    for e in (1.0, math.inf))
 
+    def stall(self):
+        """SingleGMRES.solve's ``stall`` of the float32-basis steps: (single_stall_reduction,
+        single_stall_window), or None where single_stall_reduction is 0."""
+        if self.single_stall_reduction == 0:
+            return None
+        return self.single_stall_reduction, self.single_stall_window
+
     def cycle_cap(self, stiffness_range):
         """The smallest iteration cap whose exhaustion by a changing free-set step starts the cycles
         (StepPolicy.record_iterations) on a grid whose stiffness has the range max|m_q|/min|m_q|: the

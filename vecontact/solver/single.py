@@ -154,6 +154,14 @@ class SingleGMRES:
         np.dot(y.astype(z.dtype), self.Z[:y.size], out=z)
         x += z
 
+    def _stalled(self, stall, start, k, beta):
+        """Whether the running cycle (its first estimate history[start], its start residual ``beta``,
+        k iterations in) stalls by ``stall`` = (reduction, window), or None: never (see ``solve``)."""
+        if stall is None or k <= stall[1]:
+            return False
+        res = self.history[-1]
+        return res <= stall[0] * beta and self.history[start + k - stall[1]] < 2.0 * res
+
     def _trial(self, out, x, k, H, g, s, E, carried):
         """``out`` = the solution after the first k iterations of the running cycle (monitor's build),
         formed as the solve forms its own."""
@@ -258,9 +266,9 @@ class SingleGMRES:
                 done = its >= max_it or (its >= min_it and res <= target) or hn == 0.0
                 if not done and monitor is not None:
                     done = bool(monitor(its, res, lambda out, k=k: self._trial(out, x, k, H, g, s, E, carried)))
-                if done or (stall is not None and k > stall[1] and res <= stall[0] * beta
-                            and self.history[start + k - stall[1]] < 2.0 * res):
-                    self.stalls += not done
+                stalled = not done and self._stalled(stall, start, k, beta)
+                if done or stalled:
+                    self.stalls += stalled
                     break
                 e = math.frexp(tn)[1]
                 if abs(e) > _RANGE:

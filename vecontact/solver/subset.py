@@ -537,9 +537,8 @@ class SubsetStep:
                     product(z, out)
                     means.append(self.removed)
             monitor = self.stop.monitor(self) if self.stop is not None and gm.flexible else None
-            st = self.settings
-            stall = (st.single_stall_reduction, st.single_stall_window) if st.single_stall_reduction > 0 else None
-            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis, monitor=monitor, stall=stall)
+            its, _ = gm.solve(A, sg.B.matvec, b, y, rtol, atol, max_it, carried=basis, monitor=monitor,
+                              stall=self.settings.stall())
             self.stalls += gm.stalls
             if means is not None:               # its directions, for the next step (carry.py, recycle.py)
                 self._carry_from = (gm, means, basis, space, self.idx)
