@@ -5,7 +5,11 @@
 * the solver on a paper surface at 10 m/s, ``-vc_carry_map_cost 0`` against ``-vc_carry_directions 0``: the same Newton
   path and answer, the exact step started from the carried directions and took fewer Krylov
   iterations and FFT pairs;
-* above ``-vc_carry_area_max`` the contact-set steps carry nothing: the path of ``-vc_carry_directions 0``.
+* above ``-vc_carry_area_max``, and below ``-vc_carry_modulus_min``, the contact-set steps carry nothing:
+  the path of ``-vc_carry_directions 0``.
+
+The paper case at 256^2 and 10 m/s has a modulus range of 82, under carry_modulus_min's default (100):
+the tests of the carry itself open that gate (``OPEN``).
 """
 import numpy as np
 import pytest
@@ -14,6 +18,8 @@ from reference.cases import paper_contact_solve
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
 from vecontact.solver.single import SingleGMRES
+
+OPEN = {"vc_carry_modulus_min": "50"}
 
 
 def _flexible_solve(A, B, b, restart, rtol, work=np.float64):
@@ -49,8 +55,8 @@ def test_exact_step_carries_the_last_steps_directions(exact):
     """A/A0 ~ 7.6 % at 10 m/s: contact-set steps, whose exact step follows a float32 FGMRES step on the
     same set and must cut its residual by less than mixed_reduction_max (the float32 products); the
     exact step in float32 FGMRES (single.py, the default) or in PETSc's (carry.py: ``exact`` 0)."""
-    on, act_on = paper_contact_solve(dict(exact, vc_carry_map_cost="0"))   # the changing steps as without carrying
-    off, act_off = paper_contact_solve(dict(exact, vc_carry_directions="0"))
+    on, act_on = paper_contact_solve(dict(OPEN, **exact, vc_carry_map_cost="0"))   # the changing steps as without carrying
+    off, act_off = paper_contact_solve(dict(OPEN, **exact, vc_carry_directions="0"))
     d_on, d_off = on.diagnostics, off.diagnostics
     assert on.converged and off.converged and max(on.residual, off.residual) <= 1e-8
     assert d_on["step_modes"][-1][1] == "contact"
@@ -67,13 +73,15 @@ def test_exact_step_carries_the_last_steps_directions(exact):
     assert on.linear_iterations < off.linear_iterations and on.fft_pairs < off.fft_pairs
 
 
-def test_no_carry_above_carry_area_max():
-    """The same case with carry_area_max below its A/A0 (7.6 %): the contact-set steps neither keep nor
-    start from directions, the solve of carry_directions 0 to the FFT pair; at 0.3 (the default) they
-    carry."""
-    gated, act_gated = paper_contact_solve({"vc_carry_area_max": "0.05"})
+@pytest.mark.parametrize("gate", [dict(OPEN, vc_carry_area_max="0.05"), {"vc_carry_modulus_min": "83"}],
+                         ids=["area", "modulus"])
+def test_no_carry_outside_the_gates(gate):
+    """The same case (A/A0 7.6 %, modulus range 82.1) with carry_area_max below its A/A0, or
+    carry_modulus_min above its range: the contact-set steps neither keep nor start from directions,
+    the solve of carry_directions 0 to the FFT pair; inside both gates (0.3, 50) they carry."""
+    gated, act_gated = paper_contact_solve(gate)
     off, act_off = paper_contact_solve({"vc_carry_directions": "0"})
-    on, _ = paper_contact_solve({})
+    on, _ = paper_contact_solve(OPEN)
     assert gated.converged and off.converged and max(gated.residual, off.residual) <= 1e-8
     assert gated.diagnostics["step_modes"][-1][1] == "contact" and 0.05 < gated.area <= 0.3
     assert gated.diagnostics["carried_directions"] == 0 < on.diagnostics["carried_directions"]

@@ -8,7 +8,11 @@
   rounding; the orthonormal basis; the directions kept after a solve;
 * CarriedDirections' order for an exact step: the directions, then the residual once;
 * the solver on a paper surface at 10 m/s, the map on against off (carry_map_cost 0): the same answer
-  to the solver's tolerance, fewer iterations and FFT pairs.
+  to the solver's tolerance, fewer iterations and FFT pairs; every set of directions a step keeps is
+  used by the next (none is built for a step that does not map it).
+
+The paper case's modulus range at 256^2 (82) is under carry_modulus_min's default: ``OPEN`` lets it
+carry (test_solver_carry.py tests that gate).
 """
 import numpy as np
 import pytest
@@ -26,6 +30,7 @@ from vecontact.solver.recycle import CarriedSpace, ComplianceKernel, _Basis
 from vecontact.solver.single import SingleGMRES
 
 N = 24
+OPEN = {"vc_carry_modulus_min": "50"}
 
 
 def _carried_basis(A, U):
@@ -221,8 +226,8 @@ def test_changing_steps_carry_across_the_set_changes():
     """A/A0 ~ 7.6 % at 10 m/s, contact-set steps: with the map (default) against without (0), both
     carrying into the exact step.  The answer to the solver's tolerance, fewer iterations and pairs
     (the map's own pairs, one per grid for the kernel and one per map, included)."""
-    on, act_on = paper_contact_solve({})
-    off, act_off = paper_contact_solve({"vc_carry_map_cost": "0"})
+    on, act_on = paper_contact_solve(OPEN)
+    off, act_off = paper_contact_solve(dict(OPEN, vc_carry_map_cost="0"))
     assert on.converged and off.converged and max(on.residual, off.residual) <= 1e-8
     assert on.diagnostics["step_modes"][-1][1] == "contact"
     assert on.diagnostics["carried_directions"] > off.diagnostics["carried_directions"] > 0
@@ -236,9 +241,34 @@ def test_no_map_where_the_kernel_exceeds_carry_memory():
     """The map's kernel (4 N^2 bytes on every rank, 0.26 MB at 256^2) must fit within half of
     carry_memory: with less, the fine grid's steps are those without the map (the coarse grids' kernels
     still fit)."""
-    small = {"vc_carry_memory": "5e5"}
+    small = dict(OPEN, vc_carry_memory="5e5")
     capped, _ = paper_contact_solve(small)
     off, _ = paper_contact_solve(dict(small, vc_carry_map_cost="0"))
-    mapped, _ = paper_contact_solve({"vc_carry_memory": "6e5"})
+    mapped, _ = paper_contact_solve(dict(OPEN, vc_carry_memory="6e5"))
     assert capped.diagnostics["linear_history"] == off.diagnostics["linear_history"]
     assert mapped.diagnostics["linear_history"] != off.diagnostics["linear_history"]
+
+
+@pytest.mark.parametrize("options", [OPEN, dict(OPEN, vc_carry_map_cost="0")], ids=["map", "no map"])
+def test_directions_kept_only_to_be_used(options, monkeypatch):
+    """A step keeps its directions (after_solve: copies and products over K vectors of the set) only
+    for a next step that uses them: on the same set, or mapped to a changed one.  Each kept set goes
+    into exactly one basis; without the map only the exact steps' are kept."""
+    kept, used = [], []
+    after_solve, basis = CarriedSpace.after_solve.__func__, CarriedSpace.basis
+
+    def keep(cls, *args, **kw):
+        kept.append(1)
+        return after_solve(cls, *args, **kw)
+
+    def use(self, *args, **kw):
+        used.append(1)
+        return basis(self, *args, **kw)
+    monkeypatch.setattr(CarriedSpace, "after_solve", classmethod(keep))
+    monkeypatch.setattr(CarriedSpace, "basis", use)
+    r, _ = paper_contact_solve(options)
+    assert r.converged and r.diagnostics["carried_directions"] > 0
+    assert len(kept) == len(used) > 0
+    changes = r.diagnostics["active_set_changes"]
+    if options.get("vc_carry_map_cost") == "0":         # the exact steps (no change) of the levels that carry
+        assert len(kept) <= changes.count(0)

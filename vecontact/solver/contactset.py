@@ -95,19 +95,20 @@ class ContactSetStep(SubsetStep):
         self.removed = self.mean_C(y)
         y -= self.removed
 
-    def map_space(self, space):
-        """The last step's directions mapped to the current set (recycle.py), or None when the map would
-        cost more than carry_map_cost x N^2 in its measure, |C| (changed + 2 K): the kernel values it
-        gathers, and per point of C its copies and the basis's products, about K^2 |C| flops; one
-        unit of N^2 is about one FFT pair [RESULTS.md]; or when the map's kernel (N^2 float32 on every
-        rank, ComplianceKernel) would not fit within half of carry_memory.  Collective."""
+    def maps_from(self, old):
+        """No map when it would cost more than carry_map_cost x N^2 in its measure, |C| (changed + 2 K):
+        the kernel values it gathers, and per point of C its copies and the basis's products, about
+        K^2 |C| flops; one unit of N^2 is about one FFT pair [RESULTS.md]; nor when the map's kernel
+        (N^2 float32 on every rank, ComplianceKernel) would not fit within half of carry_memory.
+        Collective."""
         st = self.settings
         if not ComplianceKernel.fits(self.fft.N, st):
-            return None
-        changed = CarriedSpace.changed(self.fft, space.idx, self.idx)
-        cost = float(self.n_S) * (changed + 2 * st.carry_directions)
-        if cost > st.carry_map_cost * float(self.fft.N) ** 2:
-            return None
+            return False
+        changed = CarriedSpace.changed(self.fft, old, self.idx)
+        return float(self.n_S) * (changed + 2 * st.carry_directions) <= st.carry_map_cost * float(self.fft.N) ** 2
+
+    def map_space(self, space):
+        """The last step's directions mapped to the current set (recycle.py).  Collective."""
         if self._kernel is None:
             self._kernel = ComplianceKernel(self.op)
         g = self.grid
@@ -117,9 +118,12 @@ class ContactSetStep(SubsetStep):
 
     def carries(self):
         """... and the contact set has at most carry_area_max of the grid's points (n_S is global: the
-        same on every rank): the carry's passes over K vectors of the set grow with it, and above 30 %
-        they cost more than the iterations they save [RESULTS.md]."""
-        return super().carries() and self.n_S <= self.settings.carry_area_max * float(self.fft.N) ** 2
+        same on every rank) and the modulus's range on this grid is at least carry_modulus_min: the
+        carry's passes over K vectors of the set grow with it, and saved more than they cost only in the
+        long steps of fast sliding [RESULTS.md]."""
+        st = self.settings
+        return (super().carries() and self.n_S <= st.carry_area_max * float(self.fft.N) ** 2
+                and self.op.modulus_range() >= st.carry_modulus_min)
 
     def release(self):
         super().release()

@@ -103,17 +103,19 @@ class CarriedSpace:
         ``older`` (a CarriedSpace on the same set: the carried ones), ``count`` in all."""
         k, G = gm.arnoldi
         m = min(k, count)
-        U = gm.Z[:m].copy()
-        W = np.empty((m, U.shape[1]), dtype=np.float32)
-        Gt = np.ascontiguousarray(G[:, :m].T, dtype=np.float32)
-        np.matmul(Gt, gm.V[:k + 1], out=W)                 # A z_j = sum_i G[i, j] V[i] (+ C E)
-        if basis is not None and basis.size:
-            W += np.ascontiguousarray(gm.projected[:, :m].T, dtype=np.float32) @ basis.C
-        W += np.asarray(means[len(means) - k:len(means) - k + m], dtype=np.float32)[:, None]
         extra = 0 if older is None else min(older.size, count - m)
+        n = gm.Z.shape[1]
+        U = np.empty((m + extra, n), dtype=gm.Z.dtype)     # each row written once (no concatenation)
+        W = np.empty((m + extra, n), dtype=np.float32)
+        U[:m] = gm.Z[:m]
+        Gt = np.ascontiguousarray(G[:, :m].T, dtype=np.float32)
+        np.matmul(Gt, gm.V[:k + 1], out=W[:m])             # A z_j = sum_i G[i, j] V[i] (+ C E)
+        if basis is not None and basis.size:
+            W[:m] += np.ascontiguousarray(gm.projected[:, :m].T, dtype=np.float32) @ basis.C
+        W[:m] += np.asarray(means[len(means) - k:len(means) - k + m], dtype=np.float32)[:, None]
         if extra:
-            U = np.concatenate([U, older.U[:extra]])
-            W = np.concatenate([W, older.W[:extra]])
+            U[m:] = older.U[:extra]
+            W[m:] = older.W[:extra]
         return cls(idx, U, W)
 
     # ------------------------------------------------------------------ the map to a new set

@@ -123,6 +123,9 @@ class SolverSettings:
     carry_area_max: float = _knob(0.3, "... only while the contact set has at most this fraction of the grid "
                                   "(larger: the passes over its K vectors cost more than they save) [RESULTS.md]",
                                   lo=0, hi=1)
+    carry_modulus_min: float = _knob(100.0, "... only where the modulus's range max|E|/min|E| over the grid's q_x is "
+                                     "at least this (fast sliding: long steps; below it the passes cost more "
+                                     "than they save) [RESULTS.md]", lo=0)
     carry_map_cost: float = _knob(10.0, "a changing contact-set step starts from the last step's K directions, "
                                   "mapped to its set (recycle.py), when |C| x (points changed + 2 K) <= this x N^2 "
                                   "(about that many FFT pairs; 0: never) [RESULTS.md]", lo=0)

@@ -394,9 +394,14 @@ class SubsetStep:
         from their map to its set (recycle.py, ``map_space``)."""
         self._unchanged = bool(unchanged)
 
+    def maps_from(self, old):
+        """Whether the directions of the last set (flat local points ``old``) are worth mapping to the
+        current set (``map_space``); the base class: never.  Collective."""
+        return False
+
     def map_space(self, space):
-        """``space`` (a recycle.CarriedSpace of the last set) on the current set, or None (the base
-        class: no map).  Collective."""
+        """``space`` (a recycle.CarriedSpace of the last set) on the current set (the base class: no
+        map, None).  Called only where ``maps_from`` said yes.  Collective."""
         return None
 
     def carries(self):
@@ -446,6 +451,8 @@ class SubsetStep:
         if pending is None or pending[0].arnoldi is None or not self.carries():
             return None
         gm, means, basis, older, idx = pending
+        if not (self._unchanged or self.maps_from(idx)):
+            return None                 # a changed set that no map serves: its copies would be wasted
         st = self.settings
         count = CarriedSpace.count(gm.n_loc, gm.Z.itemsize, st.carry_directions, st.carry_memory)
         count = self.comm.allreduce(count, op=MPI.MIN)
