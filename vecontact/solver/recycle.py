@@ -15,7 +15,7 @@ so no window holds it: each point that changed gets its kernel column over the w
 
 That is |C| (|L| + |J|) kernel values gathered and two matrix products of K columns, and the copies of
 the K directions and products over C.  The map is made only when |C| (|L| + |J| + 2 K) <=
-SolverSettings.carry_map_cost x N^2 (contactset.ContactSetStep.map_space); after larger changes, and
+SolverSettings.carry_map_cost x N^2 (contactset.ContactSetStep.maps_from); after larger changes, and
 on large contact sets, the step starts afresh.  The step's SingleGMRES then runs GCRO (single.py, ``carried``) on the orthonormalised
 products (``CarriedSpace.basis``).  Its own directions (the last cycle's z, their products from the
 Arnoldi relation), then the carried ones, K in all (carry_directions), are what the next step gets;
