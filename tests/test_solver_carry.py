@@ -9,17 +9,16 @@
   the path of ``-vc_carry_directions 0``.
 
 The paper case at 256^2 and 10 m/s has a modulus range of 82, under carry_modulus_min's default (100):
-the tests of the carry itself open that gate (``OPEN``).
+the tests of the carry itself open that gate (``CARRY_OPEN``).
 """
 import numpy as np
 import pytest
 
-from reference.cases import paper_contact_solve
+from reference.cases import CARRY_OPEN, paper_contact_solve
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
 from vecontact.solver.single import SingleGMRES
 
-OPEN = {"vc_carry_modulus_min": "50"}
 
 
 def _flexible_solve(A, B, b, restart, rtol, work=np.float64):
@@ -55,8 +54,9 @@ def test_exact_step_carries_the_last_steps_directions(exact):
     """A/A0 ~ 7.6 % at 10 m/s: contact-set steps, whose exact step follows a float32 FGMRES step on the
     same set and must cut its residual by less than mixed_reduction_max (the float32 products); the
     exact step in float32 FGMRES (single.py, the default) or in PETSc's (carry.py: ``exact`` 0)."""
-    on, act_on = paper_contact_solve(dict(OPEN, **exact, vc_carry_map_cost="0"))   # the changing steps as without carrying
-    off, act_off = paper_contact_solve(dict(OPEN, **exact, vc_carry_directions="0"))
+    # the changing steps as without carrying (no map)
+    on, act_on = paper_contact_solve(dict(CARRY_OPEN, **exact, vc_carry_map_cost="0"))
+    off, act_off = paper_contact_solve(dict(CARRY_OPEN, **exact, vc_carry_directions="0"))
     d_on, d_off = on.diagnostics, off.diagnostics
     assert on.converged and off.converged and max(on.residual, off.residual) <= 1e-8
     assert d_on["step_modes"][-1][1] == "contact"
@@ -73,7 +73,7 @@ def test_exact_step_carries_the_last_steps_directions(exact):
     assert on.linear_iterations < off.linear_iterations and on.fft_pairs < off.fft_pairs
 
 
-@pytest.mark.parametrize("gate", [dict(OPEN, vc_carry_area_max="0.05"), {"vc_carry_modulus_min": "83"}],
+@pytest.mark.parametrize("gate", [dict(CARRY_OPEN, vc_carry_area_max="0.05"), {"vc_carry_modulus_min": "83"}],
                          ids=["area", "modulus"])
 def test_no_carry_outside_the_gates(gate):
     """The same case (A/A0 7.6 %, modulus range 82.1) with carry_area_max below its A/A0, or
@@ -81,7 +81,7 @@ def test_no_carry_outside_the_gates(gate):
     the solve of carry_directions 0 to the FFT pair; inside both gates (0.3, 50) they carry."""
     gated, act_gated = paper_contact_solve(gate)
     off, act_off = paper_contact_solve({"vc_carry_directions": "0"})
-    on, _ = paper_contact_solve(OPEN)
+    on, _ = paper_contact_solve(CARRY_OPEN)
     assert gated.converged and off.converged and max(gated.residual, off.residual) <= 1e-8
     assert gated.diagnostics["step_modes"][-1][1] == "contact" and 0.05 < gated.area <= 0.3
     assert gated.diagnostics["carried_directions"] == 0 < on.diagnostics["carried_directions"]

@@ -11,14 +11,14 @@
   to the solver's tolerance, fewer iterations and FFT pairs; every set of directions a step keeps is
   used by the next (none is built for a step that does not map it).
 
-The paper case's modulus range at 256^2 (82) is under carry_modulus_min's default: ``OPEN`` lets it
+The paper case's modulus range at 256^2 (82) is under carry_modulus_min's default: ``CARRY_OPEN`` lets it
 carry (test_solver_carry.py tests that gate).
 """
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-from reference.cases import L_PAPER, NU, paper_contact_solve, small_spectrum
+from reference.cases import CARRY_OPEN, L_PAPER, NU, paper_contact_solve, small_spectrum
 from reference.dense import compliance_matrix, multiplier, random_surface
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
@@ -30,7 +30,6 @@ from vecontact.solver.recycle import CarriedSpace, ComplianceKernel, _Basis
 from vecontact.solver.single import SingleGMRES
 
 N = 24
-OPEN = {"vc_carry_modulus_min": "50"}
 
 
 def _carried_basis(A, U):
@@ -226,8 +225,8 @@ def test_changing_steps_carry_across_the_set_changes():
     """A/A0 ~ 7.6 % at 10 m/s, contact-set steps: with the map (default) against without (0), both
     carrying into the exact step.  The answer to the solver's tolerance, fewer iterations and pairs
     (the map's own pairs, one per grid for the kernel and one per map, included)."""
-    on, act_on = paper_contact_solve(OPEN)
-    off, act_off = paper_contact_solve(dict(OPEN, vc_carry_map_cost="0"))
+    on, act_on = paper_contact_solve(CARRY_OPEN)
+    off, act_off = paper_contact_solve(dict(CARRY_OPEN, vc_carry_map_cost="0"))
     assert on.converged and off.converged and max(on.residual, off.residual) <= 1e-8
     assert on.diagnostics["step_modes"][-1][1] == "contact"
     assert on.diagnostics["carried_directions"] > off.diagnostics["carried_directions"] > 0
@@ -241,15 +240,15 @@ def test_no_map_where_the_kernel_exceeds_carry_memory():
     """The map's kernel (4 N^2 bytes on every rank, 0.26 MB at 256^2) must fit within half of
     carry_memory: with less, the fine grid's steps are those without the map (the coarse grids' kernels
     still fit)."""
-    small = dict(OPEN, vc_carry_memory="5e5")
+    small = dict(CARRY_OPEN, vc_carry_memory="5e5")
     capped, _ = paper_contact_solve(small)
     off, _ = paper_contact_solve(dict(small, vc_carry_map_cost="0"))
-    mapped, _ = paper_contact_solve(dict(OPEN, vc_carry_memory="6e5"))
+    mapped, _ = paper_contact_solve(dict(CARRY_OPEN, vc_carry_memory="6e5"))
     assert capped.diagnostics["linear_history"] == off.diagnostics["linear_history"]
     assert mapped.diagnostics["linear_history"] != off.diagnostics["linear_history"]
 
 
-@pytest.mark.parametrize("options", [OPEN, dict(OPEN, vc_carry_map_cost="0")], ids=["map", "no map"])
+@pytest.mark.parametrize("options", [CARRY_OPEN, dict(CARRY_OPEN, vc_carry_map_cost="0")], ids=["map", "no map"])
 def test_directions_kept_only_to_be_used(options, monkeypatch):
     """A step keeps its directions (after_solve: copies and products over K vectors of the set) only
     for a next step that uses them: on the same set, or mapped to a changed one.  Each kept set goes

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from reference.cases import L_PAPER, NU, Q0
+from reference.cases import CARRY_OPEN, L_PAPER, NU, Q0
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
 from vecontact.core.pfft import SlabFFT
@@ -316,9 +316,8 @@ def test_exact_steps_single_same_solution(sigma0, mode):
     directions into the exact step (carry_modulus_min opened below this grid's modulus range, 82):
     without them the float32 exact step of the contact case stops on its 2-norm atol just short of the
     measure and one short exact step more follows (test_solver_carry.py)."""
-    carry = {"vc_carry_modulus_min": "50"}
-    one, act1, _ = _solve(256, 10.0, sigma0, carry)
-    two, act2, _ = _solve(256, 10.0, sigma0, dict(carry, vc_single_exact_reduction_max="0"))
+    one, act1, _ = _solve(256, 10.0, sigma0, CARRY_OPEN)
+    two, act2, _ = _solve(256, 10.0, sigma0, dict(CARRY_OPEN, vc_single_exact_reduction_max="0"))
     d1, d2 = one.diagnostics, two.diagnostics
     assert d1["step_modes"][-1][1] == mode
     exact = np.diff(d1["linear_history"])[-1]          # the last step's Krylov iterations

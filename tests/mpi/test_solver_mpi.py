@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from reference import analytic as an
-from reference.cases import L_PAPER, NU, Q0, assert_contact_solution, make_fft, small_spectrum, solve_full
+from reference.cases import (CARRY_OPEN, L_PAPER, NU, Q0, assert_contact_solution, make_fft, small_spectrum,
+                             solve_full)
 from reference.dense import dense_solve, dense_solve_1d, random_surface
 
 from vecontact.physics.modulus import Elastic, HavriliakNegami
@@ -248,7 +249,7 @@ def test_carried_directions_collective(comm):
     N, tol = 256, 1e-8
     psd = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
     out = []
-    for c, opts in ((comm, {"vc_carry_modulus_min": "50"}), (comm.Split(comm.rank, 0), {"vc_carry_directions": "0"})):
+    for c, opts in ((comm, CARRY_OPEN), (comm.Split(comm.rank, 0), {"vc_carry_directions": "0"})):
         fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
         h = generate(fft, L_PAPER, psd, 1)
         out.append(solve_contact(fft, L_PAPER, h, hn(), 10.0, 1.0e5, tolerance=tol, store=(), petsc_options=opts))

@@ -96,11 +96,11 @@ class ContactSetStep(SubsetStep):
         y -= self.removed
 
     def maps_from(self, old):
-        """No map when it would cost more than carry_map_cost x N^2 in its measure, |C| (changed + 2 K):
-        the kernel values it gathers, and per point of C its copies and the basis's products, about
-        K^2 |C| flops; one unit of N^2 is about one FFT pair [RESULTS.md]; nor when the map's kernel
-        (N^2 float32 on every rank, ComplianceKernel) would not fit within half of carry_memory.
-        Collective."""
+        """Whether to map the directions of the last set ``old``: not when the map would cost more than
+        carry_map_cost x N^2 in its measure, |C| (changed + 2 K): the kernel values it gathers, and per
+        point of C its copies and the basis's products, about K^2 |C| flops; one unit of N^2 is about
+        one FFT pair [RESULTS.md]; nor when the map's kernel (N^2 float32 on every rank,
+        ComplianceKernel) would not fit within half of carry_memory.  Collective."""
         st = self.settings
         if not ComplianceKernel.fits(self.fft.N, st):
             return False
