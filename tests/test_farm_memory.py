@@ -2,10 +2,12 @@
 estimate against the measured peaks, the node's available memory from fake /proc and cgroup trees,
 and the rule it gives."""
 import os
+import warnings
 
 import pytest
 from mpi4py import MPI
 
+from vecontact.errors import InputWarning
 from vecontact.farm import memory, progress, schedule
 from vecontact.solver.settings import SolverSettings
 
@@ -51,6 +53,11 @@ def test_case_bytes_covers_the_measured_peaks():
                 SolverSettings(carry_memory=8 * n - 1)):
         assert memory.case_bytes(256, 1, off) == pytest.approx(memory.case_bytes(256, 1) - carry, rel=1e-12)
     assert memory.case_bytes(8192, 1) == memory.case_bytes(8192, 1, SolverSettings(carry_map_cost=0.0))
+    # 8192^2 on 2 ranks (session 63: 0.01 m/s, 4.5 %, VmHWM of both benchmark workers, kB): the arrays
+    # alone are BYTES_PER_POINT to 0.5 % (a 4.5 % case holds few Krylov vectors); the estimate bounds it
+    peak, n = 8882352 * 1024, 8192 ** 2 / 2
+    assert memory.BYTES_PER_POINT * n == pytest.approx(peak, rel=5e-3)
+    assert peak <= memory.case_bytes(8192, 2)
     assert memory.case_bytes(8192, 1, SolverSettings(carry_memory=6e8)) > memory.case_bytes(8192, 1)
 
 
@@ -92,6 +99,28 @@ def test_auto_fills_the_ranks():
     # the grid rule and a fixed number ignore the count
     assert auto(4096, 64, "auto", None, count=1) == 16
     assert auto(4096, 64, 2, 12.2 * GB, count=1) == 2
+
+
+def test_a_grid_that_may_not_fit_is_warned_of():
+    from vecontact.farm.run import _warn_memory
+    from vecontact.farm.schedule import Chain
+    s = SolverSettings()
+    # the 2-core development machine, 12.2 GB a rank: 8192^2 needs 14.0 GB a rank on its 2 ranks (by
+    # the estimate; 9.1 GB measured at 4.5 % contact), 4096^2 fits on one
+    chains = [Chain(0, (1e6, 1, 0.01), [0, 1], 8192, 2), Chain(1, (1e6, 1, 10.0), [2], 8192, 2),
+              Chain(2, (5e5, 1, 0.01), [3], 4096, 1)]
+    with pytest.warns(InputWarning) as got:
+        _warn_memory(chains, 12.2 * GB, s)
+    assert [str(w.message) for w in got] == [
+        "numerics.ranks_per_case: N=8192 on 2 ranks: a case may need 14.0 GB a rank, more than the 11.0 GB "
+        "a rank may fill: it may run out of memory (on more ranks a case needs less a rank)"]
+    assert memory.fits(4096, 1, 12.2 * GB) and not memory.fits(8192, 2, 12.2 * GB)
+    # silent where everything fits or the memory is unknown
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _warn_memory(chains[2:], 12.2 * GB, s)
+        _warn_memory(chains, None, s)
+        assert memory.fits(8192, 1, None)
 
 
 def test_build_chains_passes_memory():

@@ -15,7 +15,7 @@ import os
 from vecontact.solver.recycle import ComplianceKernel
 from vecontact.solver.settings import SolverSettings
 
-__all__ = ["case_bytes", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
+__all__ = ["case_bytes", "fits", "node_available", "memory_per_rank", "BYTES_PER_POINT", "KRYLOV_PEAK", "MEMORY_USE"]
 
 # the solver's arrays per grid point of a case: 4.5e9 B peak at 4096² on 1 rank, 0.01 m/s, 4.5 % (6.0e9
 # before session 37) [RESULTS.md, "Memory per grid point"]
@@ -45,6 +45,12 @@ def case_bytes(N, g, settings=None):
     inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact
     kernel = ComplianceKernel.bytes(N) if ComplianceKernel.fits(N, s) else 0.0
     return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner) + kernel
+
+
+def fits(N, g, memory, settings=None):
+    """Whether an N x N case's share on ``g`` ranks (case_bytes) fits in MEMORY_USE of ``memory``, the
+    bytes a rank may use; True where ``memory`` is None (unknown)."""
+    return memory is None or case_bytes(N, g, settings) <= MEMORY_USE * memory
 
 
 def _read_int(path):

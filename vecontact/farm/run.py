@@ -7,13 +7,15 @@ then commits the last rows and prints the summary (:mod:`~vecontact.farm.progres
 """
 import time
 import traceback
+import warnings
 
 import numpy as np
 from mpi4py import MPI
 
 from vecontact.farm import progress
 from vecontact.farm.interrupt import Interruptible
-from vecontact.farm.memory import memory_per_rank
+from vecontact.errors import InputWarning
+from vecontact.farm.memory import MEMORY_USE, case_bytes, fits, memory_per_rank
 from vecontact.farm.schedule import Coordinator, build_chains
 from vecontact.farm.transport import Hub, Link, abort, wait
 from vecontact.farm.worker import Worker
@@ -27,6 +29,20 @@ def petsc_options(job, petsc_args):
     if petsc_args:
         opts.update(parse(list(petsc_args), "numerics.petsc"))
     return opts
+
+
+def _warn_memory(chains, memory, settings):
+    """An InputWarning for every grid whose cases, on the ranks they get, may need more memory a rank
+    than it may fill (memory.fits: case_bytes against MEMORY_USE of ``memory``, the bytes a rank may
+    use): auto at its largest rank count, or a fixed ranks_per_case. The estimate bounds the measured
+    peaks (up to 1.6x them at 8192²), so such a case may still fit."""
+    for N, g in sorted({(ch.N, ch.g) for ch in chains}):
+        if not fits(N, g, memory, settings):
+            warnings.warn(
+                f"numerics.ranks_per_case: N={N} on {g} rank{'s' if g > 1 else ''}: a case may need "
+                f"{case_bytes(N, g, settings) / 1e9:.1f} GB a rank, more than the "
+                f"{MEMORY_USE * memory / 1e9:.1f} GB a rank may fill: it may run out of memory (on more "
+                f"ranks a case needs less a rank)", InputWarning, stacklevel=2)
 
 
 def _first_commit(comm, writer):
@@ -76,9 +92,11 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     threaded = size == 1 or MPI.Query_thread() >= MPI.THREAD_MULTIPLE
     nwork = size if threaded else size - 1
     Ns = {q1: job.surface.grid(q1) for q1 in psds}
-    memory = memory_per_rank(comm) if num.ranks_per_case == "auto" else None
+    memory = memory_per_rank(comm)
     settings = SolverSettings().with_options(options)   # checked by petsc_options: -vc_ budgets
     chains = build_chains(cases, todo, lambda q1: Ns[q1], nwork, num.ranks_per_case, memory, settings)
+    if rank == 0:
+        _warn_memory(chains, memory, settings)
     _init_petsc(job)
     ctl = comm.Dup()
     fin = comm.Dup()

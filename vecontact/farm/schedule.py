@@ -43,7 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Optional
 
-from vecontact.farm.memory import MEMORY_USE, case_bytes
+from vecontact.farm.memory import fits
 from vecontact.rows import CONVERGED, REASON
 
 AUTO_POINTS_PER_RANK = 1024 * 1024
@@ -91,7 +91,7 @@ def ranks_for_grid(N, nranks, ranks_per_case="auto", memory=None, settings=None,
     cap = max(1, min(N // 2, int(nranks)))
     if ranks_per_case == "auto" and memory is not None:
         g = 1
-        while g < cap and case_bytes(N, g, settings) > MEMORY_USE * memory:
+        while g < cap and not fits(N, g, memory, settings):
             g *= 2
         if count:
             fill = min(_grid_ranks(N), nranks // count)
