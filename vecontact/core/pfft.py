@@ -509,10 +509,6 @@ class SlabFFT:
         qy = dq * self.ky.astype(np.float64)
         return qx, qy, np.sqrt(qx * qx + qy * qy)
 
-    def nyquist_row(self):
-        """Index (along axis 0) of the x-Nyquist row kx = -N/2, or None for odd N."""
-        return self.N // 2 if self.N % 2 == 0 else None
-
     def hermitian_fix(self, multiplier):
         """Make a multiplier valid for real -> real operators (docs/conventions.md §1).
 

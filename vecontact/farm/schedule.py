@@ -138,10 +138,6 @@ class Chain:
     N: int
     g: int
 
-    @property
-    def weight(self):
-        return len(self.cases) * case_weight(self.N)
-
 
 def build_chains(cases, todo, grid_of, nranks, ranks_per_case="auto", memory=None, settings=None):
     """Chains of the unfinished cases (``todo``: booleans), ordered largest first; ``memory`` and

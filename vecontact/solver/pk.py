@@ -39,10 +39,6 @@ def allmax(comm, values):
     return out
 
 
-def _masked_max(a, mask):
-    return float(a.max(initial=-np.inf, where=mask)) if a.size else -np.inf
-
-
 def pk_solve(op, tol=1e-8, max_iter=20000, p0=None, monitor=None):
     """Solve the elastic contact problem of ``op`` (a ContactOperator) by Polonsky-Keer CG.
 
