@@ -60,6 +60,23 @@ def test_overhead_counts_only_converged_oracles(bench):
     assert "upper bound" in bench._oracle_text(dict(capped, oracle_iterations=2000, oracle_pairs=364.0))
 
 
+def test_overhead_against_a_restarted_oracle_is_a_lower_bound(bench):
+    """An oracle that restarted (its basis past --oracle-memory) took more iterations than the
+    unrestarted one: its overhead is a lower bound, counted in the max and listed; records without
+    oracle_restart (before session 63) are taken as they are."""
+    full = dict(_snes(1024, 10, 0.3, 548.0, 4.0, 0.005, 2.08, None), oracle_iterations=131, oracle_restart=2000)
+    short = dict(_snes(8192, 10, 0.05, 1015.2, 730.0, 0.84, 1.68, None), oracle_iterations=300,
+                 oracle_restart=250)
+    old = dict(_snes(2048, 10, 0.3, 875.4, 35.0, 0.028, 1.55, None), oracle_iterations=280)
+    out = bench.summarise([full, short, old])
+    assert out["overhead_max"] == 2.08 and out["overhead_cases"] == "3 of 3"
+    assert out["overhead_restarted"] == [dict(N=8192, v=10, target=0.05, overhead_at_least=1.68)]
+    text = bench._oracle_text(dict(short, oracle_pairs=604.0))
+    assert "restarted every 250: a lower bound" in text
+    assert "restarted" not in bench._oracle_text(dict(full, oracle_pairs=264.0))
+    assert "restarted" not in bench._oracle_text(dict(old, oracle_pairs=564.0))
+
+
 def test_summary_compares_blas_side_by_side(bench, capsys):
     lib = "/opt/openblas"
     recs = [dict(kind="fft", N=2048, t_pair=0.04, blas="reference"),

@@ -127,18 +127,23 @@ def assert_contact_solution(res, fields, h, sigma0, tol_p=1e-6, tol_g=1e-6):
 CARRY_OPEN = {"vc_carry_modulus_min": "50"}
 
 
-def paper_contact_solve(options, N=256):
-    """solve_contact on the seed-1 paper surface at N (q1 = N/16 q0), HN at 10 m/s, 1.1e5 Pa (A/A0 ~ 7.6 %:
-    contact-set steps), tolerance 1e-8, with the PETSc ``options``: (result, whole-grid contact set)."""
+def paper_case(N=256):
+    """The seed-1 paper surface at N (q1 = N/16 q0) on one rank and the HN compound: (fft, h, hn)."""
     from mpi4py import MPI
     from vecontact.core.pfft import SlabFFT
     from vecontact.core.surface import generate
     from vecontact.physics.modulus import HavriliakNegami
     from vecontact.physics.spectrum import SelfAffine
-    from vecontact.solver import solve_contact
     fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
     h = generate(fft, L_PAPER, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), 1)
-    hn = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    return fft, h, HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+
+
+def paper_contact_solve(options, N=256):
+    """solve_contact on paper_case's surface, HN at 10 m/s, 1.1e5 Pa (A/A0 ~ 7.6 % at 256²:
+    contact-set steps), tolerance 1e-8, with the PETSc ``options``: (result, whole-grid contact set)."""
+    from vecontact.solver import solve_contact
+    fft, h, hn = paper_case(N)
     r = solve_contact(fft, L_PAPER, h, hn, 10.0, 1.1e5, tolerance=1e-8, store=("pressure",),
                       petsc_options=options)
     return r, fft.gather(r.pressure > 0)

@@ -181,26 +181,33 @@ class ContactSetStep(SubsetStep):
         return s
 
 
-def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
+def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", memory=6e9):
     """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
     rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
-    most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.
+    most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.  The FGMRES
+    does not restart (a restart adds iterations, and so would flatter the loop's ratio to it) unless its
+    basis, two float64 vectors an iteration over the set, would pass ``memory`` bytes a rank: then it
+    restarts where it fits (``restart``; iterations beyond it make the ratio a lower bound).
 
     Returns dict(iterations, pairs (FFT pairs of the grid of ``op``, set-up included), residual (the
-    inner solve's final residual norm, h_rms), converged)."""
+    inner solve's final residual norm, h_rms), converged, restart)."""
     from vecontact.solver.snes import hold_comm, petsc
     PETSc = petsc()
     fft = op.fft
     comm = fft.comm
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
-    n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    # #15's step: m_CC alone (no edge term), float64
-    step = ContactSetStep(op, op.kappa, PETSc, prefix, replace(settings, pc_range_max=0.0, edge_window=0))
+    n_set = int(np.count_nonzero(act))
+    n_act = comm.allreduce(n_set, op=MPI.SUM)
+    # #15's step: m_CC alone (no edge term), float64; its restart from ``memory`` alone
+    step = ContactSetStep(op, op.kappa, PETSc, prefix,
+                          replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
+                                  inner_restart_memory=float(memory)))
     r = y = None
     try:
         t0 = fft.transforms
         step.set_active(act, n_act)
+        restart = int(step.defaults(n_set)["ksp_gmres_restart"])
         step.set_tolerances(rtol, 0.0, max_it)
         # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
         rhs = np.where(act, op.hhat, -1.0 / op.kappa)
@@ -210,7 +217,8 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_"):
         step.apply(None, r, y)
         pairs = (fft.transforms - t0) / 2.0
         return dict(iterations=int(step.iterations), pairs=float(pairs),
-                    residual=float(step.ksp.getResidualNorm()), converged=bool(step.ksp.getConvergedReason() > 0))
+                    residual=float(step.ksp.getResidualNorm()), converged=bool(step.ksp.getConvergedReason() > 0),
+                    restart=restart)
     finally:
         step.release()
         for v in (r, y):
