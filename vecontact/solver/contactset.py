@@ -181,7 +181,7 @@ class ContactSetStep(SubsetStep):
         return s
 
 
-def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", memory=6e9):
+def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
     """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
     rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
     most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.  The FGMRES
