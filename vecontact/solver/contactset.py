@@ -197,8 +197,7 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
     comm = fft.comm
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
-    n_set = int(np.count_nonzero(act))
-    n_act = comm.allreduce(n_set, op=MPI.SUM)
+    n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
     # #15's step: m_CC alone (no edge term), float64; its restart from ``memory`` alone
     step = ContactSetStep(op, op.kappa, PETSc, prefix,
                           replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
@@ -207,7 +206,8 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
     try:
         t0 = fft.transforms
         step.set_active(act, n_act)
-        restart = int(step.defaults(n_set)["ksp_gmres_restart"])
+        # the restart the KSP was set from (the step's default from ``memory``, or the user's)
+        restart = PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
         step.set_tolerances(rtol, 0.0, max_it)
         # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
         rhs = np.where(act, op.hhat, -1.0 / op.kappa)
