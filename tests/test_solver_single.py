@@ -315,9 +315,14 @@ def test_exact_steps_single_same_solution(sigma0, mode):
     watched by the measure stop (its looks: the monitor of single.py).  Both carry the last step's
     directions into the exact step (carry_modulus_min opened below this grid's modulus range, 82):
     without them the float32 exact step of the contact case stops on its 2-norm atol just short of the
-    measure and one short exact step more follows (test_solver_carry.py)."""
-    one, act1, _ = _solve(256, 10.0, sigma0, CARRY_OPEN)
-    two, act2, _ = _solve(256, 10.0, sigma0, dict(CARRY_OPEN, vc_single_exact_reduction_max="0"))
+    measure and one short exact step more follows (test_solver_carry.py).  The contact-set steps' 2-norm
+    cap is lowered 25x (inner_atol_factor 0.2, default 5) so that only the measure stop can end the
+    exact step: with the default cap, whether the stop looks before the cap ends the step turns on the
+    start (at 1.1e5 one look with coarse_tol 0.1, none with 0.3; with the lower cap one or two looks
+    at 1e5-2e5 with either)."""
+    opts = dict(CARRY_OPEN, vc_inner_atol_factor="0.2")
+    one, act1, _ = _solve(256, 10.0, sigma0, opts)
+    two, act2, _ = _solve(256, 10.0, sigma0, dict(opts, vc_single_exact_reduction_max="0"))
     d1, d2 = one.diagnostics, two.diagnostics
     assert d1["step_modes"][-1][1] == mode
     exact = np.diff(d1["linear_history"])[-1]          # the last step's Krylov iterations

@@ -138,7 +138,7 @@ class SolverSettings:
     # --- coarse grids and warm starts (contact.py, warmstart.py)
     coarse_min_n: int = _knob(64, "coarsest grid size (N/2, N/4, ... down to this) [RESULTS.md]", lo=2)
     coarse_levels: int = _knob(6, "coarse grids at most (6: down to coarse_min_n up to 4096^2) [RESULTS.md]", lo=0)
-    coarse_tol: float = _knob(0.1, "convergence tolerance on the coarse grids (the fine one's if larger) [RESULTS.md]",
+    coarse_tol: float = _knob(0.3, "convergence tolerance on the coarse grids (the fine one's if larger) [RESULTS.md]",
                               lo=0, hi=1, lo_open=True)
     coarse_max_it: int = _knob(50, "Newton iterations per coarse grid", lo=1)
     smooth_sweeps: int = _knob(6, "projected Richardson sweeps after each prolongation (warmstart.smooth_gap) "
