@@ -30,20 +30,14 @@ PETSc's Vecs, which tracemalloc does not see (their size is the budgets' busines
 float32 Grid unless the contact set's preconditioner asks for it (with mixed PETSc steps it always holds
 one: 8 more, and the float32 twin's buffers).
 """
-import math
 import tracemalloc
 
 import pytest
-from mpi4py import MPI
 
-from vecontact.core.pfft import SlabFFT
-from vecontact.core.surface import generate
-from vecontact.physics.modulus import HavriliakNegami
-from vecontact.physics.spectrum import SelfAffine
+from reference.cases import L_PAPER, paper_case
 from vecontact.solver import solve_contact
 
 N = 256
-Q0 = 2.5e5
 DOUBLE_KRYLOV = ("-vc_changing_precision double -vc_cycle_precision double -vc_mixed_reduction_max 0 "
                  "-vc_single_exact_reduction_max 0")
 
@@ -57,12 +51,8 @@ def test_a_solve_holds_its_inventory_of_arrays(sigma0, mode, area, bound):
     2-norm cap before the measure stop's first look, which makes its g and p; 130 and 108 before the
     measures' scratch, 226 and 211 before session 37's changes).  A
     first solve makes the caches (coarse SlabFFTs, the float32 twin) outside the measurement."""
-    L = 2 * math.pi / Q0
-    spectrum = SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28)
-    modulus = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
-    h = generate(fft, L, spectrum, 1)
-    solve_contact(fft, L, h, modulus, 10.0, sigma0, tolerance=1e-4, petsc_options=DOUBLE_KRYLOV)
+    fft, h, modulus = paper_case(N)
+    solve_contact(fft, L_PAPER, h, modulus, 10.0, sigma0, tolerance=1e-4, petsc_options=DOUBLE_KRYLOV)
     held = []
 
     def monitor(level, iteration, residual):
@@ -72,7 +62,7 @@ def test_a_solve_holds_its_inventory_of_arrays(sigma0, mode, area, bound):
     tracemalloc.start()
     try:
         before = tracemalloc.get_traced_memory()[0]
-        r = solve_contact(fft, L, h, modulus, 10.0, sigma0, tolerance=1e-8, petsc_options=DOUBLE_KRYLOV,
+        r = solve_contact(fft, L_PAPER, h, modulus, 10.0, sigma0, tolerance=1e-8, petsc_options=DOUBLE_KRYLOV,
                           store=("pressure",), monitor=monitor)
     finally:
         tracemalloc.stop()

@@ -11,15 +11,10 @@
 """
 import numpy as np
 import pytest
-from mpi4py import MPI
 
-from reference.cases import CARRY_OPEN, L_PAPER, NU, Q0
+from reference.cases import CARRY_OPEN, L_PAPER, paper_case
 from reference.krylov import allsum as _allsum, operators as _ops, system as _system
 
-from vecontact.core.pfft import SlabFFT
-from vecontact.core.surface import generate
-from vecontact.physics.modulus import HavriliakNegami
-from vecontact.physics.spectrum import SelfAffine
 from vecontact.solver import solve_contact
 from vecontact.solver.single import SingleGMRES
 
@@ -254,9 +249,7 @@ _DOUBLE = {"vc_changing_precision": "double", "vc_cycle_precision": "double", "v
 
 
 def _solve(N, v, sigma0, options):
-    fft = SlabFFT(MPI.COMM_SELF, N, planner="estimate", wisdom_file=False)
-    h = generate(fft, L_PAPER, SelfAffine(Q0, 4 * Q0, N // 16 * Q0, 0.8, 1.0616e-28), 1)
-    hn = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    fft, h, hn = paper_case(N)
     t0 = fft.single_transforms
     r = solve_contact(fft, L_PAPER, h, hn, v, sigma0, tolerance=1e-8, store=("pressure",), petsc_options=options)
     return r, fft.gather(r.pressure > 0), (fft.single_transforms - t0) / 2
