@@ -17,9 +17,9 @@ def test_oracle_runs_unrestarted_and_a_restart_costs_iterations():
     act = r.pressure > 0
     n_set = int(np.count_nonzero(act))
 
-    def oracle(memory):
+    def oracle(memory, krylov="fgmres"):
         return oracle_solve(ContactOperator(fft, L_PAPER, hn, v, sigma0, h), act, 1e-8, 500, SolverSettings(),
-                            memory=memory)
+                            memory=memory, krylov=krylov)
 
     full = oracle(6e9)
     assert full["restart"] == 500 and full["converged"] and full["iterations"] < 500
@@ -30,3 +30,17 @@ def test_oracle_runs_unrestarted_and_a_restart_costs_iterations():
     short = oracle(16.0 * n_set * 11)
     assert short["restart"] == 10 and short["converged"]
     assert full["iterations"] > 10 and short["iterations"] > full["iterations"]
+
+    # right-preconditioned GMRES: m_CC is a fixed linear map, so FGMRES's iterations and residual (to
+    # rounding: the two orthogonalise different vectors) from one vector an iteration, the solution formed
+    # with one more m_CC (one pair); the same memory fits twice the restart
+    gm = oracle(6e9, "gmres")
+    assert gm["restart"] == 500 and gm["converged"]
+    assert abs(gm["iterations"] - full["iterations"]) <= 1
+    assert abs(gm["residual"] - full["residual"]) <= 1e-3 * full["residual"]
+    assert gm["pairs"] == full["pairs"] + 1 + (gm["iterations"] - full["iterations"]) * 2
+    assert oracle(16.0 * n_set * 11, "gmres")["restart"] == 21
+    # the choice does not outlive the call: the next FGMRES oracle is FGMRES again
+    from vecontact.solver.snes import petsc
+    assert not petsc().Options().hasName("oracle_contact_ksp_type")
+    assert oracle(6e9)["pairs"] == full["pairs"]

@@ -181,13 +181,18 @@ class ContactSetStep(SubsetStep):
         return s
 
 
-def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
+def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, krylov="fgmres"):
     """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
     rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
     most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.  The FGMRES
     does not restart (a restart adds iterations, and so would flatter the loop's ratio to it) unless its
     basis, two float64 vectors an iteration over the set, would pass ``memory`` bytes a rank: then it
     restarts where it fits (``restart``; iterations beyond it make the ratio a lower bound).
+
+    ``krylov="gmres"``: right-preconditioned GMRES instead.  Its preconditioner m_CC is a fixed float64
+    map, so its iterates are FGMRES's (the same iterations and residuals, benchmarks/RESULTS.md, "The
+    oracle as right-preconditioned GMRES"), from one basis vector an iteration: twice the iterations fit
+    ``memory``; it applies m_CC once more to form the solution (one pair more, and one at each restart).
 
     Returns dict(iterations, pairs (FFT pairs of the grid of ``op``, set-up included), residual (the
     inner solve's final residual norm, h_rms), converged, restart)."""
@@ -198,16 +203,26 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    # #15's step: m_CC alone (no edge term), float64; its restart from ``memory`` alone
+    if krylov not in ("fgmres", "gmres"):
+        raise ValueError(f"oracle_solve: krylov {krylov!r} is not fgmres or gmres")
+    # #15's step: m_CC alone (no edge term), float64; its restart from ``memory`` alone (the settings'
+    # rule counts two vectors an iteration, GMRES keeps one)
+    vectors = 2 if krylov == "fgmres" else 1
     step = ContactSetStep(op, op.kappa, PETSc, prefix,
                           replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
-                                  inner_restart_memory=float(memory)))
+                                  inner_restart_memory=float(memory) * 2 / vectors))
+    opts = PETSc.Options()
+    pre = step.ksp.getOptionsPrefix()
+    kind = {pre + "ksp_type": "gmres", pre + "ksp_pc_side": "right"} if vectors == 1 else {}
+    kind = {k: v for k, v in kind.items() if not opts.hasName(k)}    # the user's choice stays
+    for k, v in kind.items():
+        opts[k] = v
     r = y = None
     try:
         t0 = fft.transforms
         step.set_active(act, n_act)
         # the restart the KSP was set from (the step's default from ``memory``, or the user's)
-        restart = PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
+        restart = opts.getInt(pre + "ksp_gmres_restart")
         step.set_tolerances(rtol, 0.0, max_it)
         # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
         rhs = np.where(act, op.hhat, -1.0 / op.kappa)
@@ -221,6 +236,8 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory):
                     restart=restart)
     finally:
         step.release()
+        for k in kind:
+            opts.delValue(k)
         for v in (r, y):
             if v is not None:
                 v.destroy()
