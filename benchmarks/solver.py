@@ -39,10 +39,11 @@ Output: a table, then as LAST line one JSON object:
                        FGMRES run to --oracle-rtol (contactset.oracle_solve) without a restart while its
                        basis fits --oracle-memory GB a rank (a restart adds iterations and would flatter
                        the ratio; --oracle-krylov gmres: right-preconditioned GMRES, the same iterations
-                       from half the basis, for the large sets of 4096^2); only the cases whose oracle converged count, ``overhead_bounds`` lists
-                       the others' upper bounds (their oracle stopped at --oracle-max-it),
-                       ``overhead_restarted`` the cases whose oracle restarted all the same (lower bounds,
-                       counted in the max), and ``--no-oracle`` skips the oracle (n/a, null)
+                       from half the basis, for the large sets of 4096^2); only the cases whose oracle
+                       converged count, ``overhead_bounds`` lists the others' upper bounds (their oracle
+                       stopped at --oracle-max-it), ``overhead_restarted`` the cases whose oracle
+                       restarted all the same (lower bounds, counted in the max), and ``--no-oracle``
+                       skips the oracle (n/a, null)
   all_converged        every vecontact and PK solve converged (the oracle is not a solve of the case)
 plus the medians and the targets.  With ``--repeat K`` every viscoelastic solve runs K times and its
 seconds are the fastest run's, as the raw pair's are the fastest of --fft-repeats (this machine's
