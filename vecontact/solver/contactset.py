@@ -181,6 +181,15 @@ class ContactSetStep(SubsetStep):
         return s
 
 
+class _GMRESStep(ContactSetStep):
+    """A contact-set step whose inner KSP defaults to right-preconditioned GMRES (oracle_solve's
+    ``krylov="gmres"``; the user's -<prefix>contact_ksp_* options still win, and release() removes these
+    defaults with the others)."""
+
+    def defaults(self, n_loc):
+        return dict(super().defaults(n_loc), ksp_type="gmres", ksp_pc_side="right")
+
+
 def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, krylov="fgmres"):
     """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
     rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
@@ -203,26 +212,20 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
     hold_comm(comm)
     nloc = int(np.prod(fft.local_real_shape))
     n_act = comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
-    if krylov not in ("fgmres", "gmres"):
+    steps = {"fgmres": ContactSetStep, "gmres": _GMRESStep}
+    if krylov not in steps:
         raise ValueError(f"oracle_solve: krylov {krylov!r} is not fgmres or gmres")
     # #15's step: m_CC alone (no edge term), float64; its restart from ``memory`` alone (the settings'
     # rule counts two vectors an iteration, GMRES keeps one)
-    vectors = 2 if krylov == "fgmres" else 1
-    step = ContactSetStep(op, op.kappa, PETSc, prefix,
-                          replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
-                                  inner_restart_memory=float(memory) * 2 / vectors))
-    opts = PETSc.Options()
-    pre = step.ksp.getOptionsPrefix()
-    kind = {pre + "ksp_type": "gmres", pre + "ksp_pc_side": "right"} if vectors == 1 else {}
-    kind = {k: v for k, v in kind.items() if not opts.hasName(k)}    # the user's choice stays
-    for k, v in kind.items():
-        opts[k] = v
+    step = steps[krylov](op, op.kappa, PETSc, prefix,
+                         replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
+                                 inner_restart_memory=float(memory) * (2 if krylov == "gmres" else 1)))
     r = y = None
     try:
         t0 = fft.transforms
         step.set_active(act, n_act)
         # the restart the KSP was set from (the step's default from ``memory``, or the user's)
-        restart = opts.getInt(pre + "ksp_gmres_restart")
+        restart = PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
         step.set_tolerances(rtol, 0.0, max_it)
         # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
         rhs = np.where(act, op.hhat, -1.0 / op.kappa)
@@ -236,8 +239,6 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
                     restart=restart)
     finally:
         step.release()
-        for k in kind:
-            opts.delValue(k)
         for v in (r, y):
             if v is not None:
                 v.destroy()
