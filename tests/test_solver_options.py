@@ -65,7 +65,8 @@ def test_mapping_values():
     ("-contact_step_area 0.2", "renamed -vc_contact_step_area"),
     ("-snes_type vinewtonssls", "removed"),
     ("-vc_recycle_vectors 0", "removed with the Krylov recycling"),
-    ("-vc_contact_step_large_n 4096", "removed: -vc_contact_step_area_large applies by the stiffness's range"),
+    ("-vc_contact_step_large_n 4096", "removed: -vc_contact_step_area_large applies by the range of"),
+    ("-vc_contact_step_range_max 4e5", "replaced by -vc_contact_step_modulus_large"),
     ({"vc_recycle_cost": 4}, "lost in wall time"),
     ("-vc_smooth_omega 0.7", "Chebyshev steps now, -vc_smooth_ratio"),
     ("-vc_contact_step_range_min 5e4", "replaced by -vc_contact_step_modulus_max"),
@@ -111,25 +112,26 @@ def test_settings_check_their_ranges():
             SolverSettings(**bad)
 
 
-def test_step_area_by_stiffness_and_modulus_range():
-    """contact_step_area_large where the stiffness range exceeds contact_step_range_max; else
-    contact_step_area_small where the modulus range is at most contact_step_modulus_max on grids of at
-    least contact_step_min_n.  The paper's compound, (stiffness range, modulus range) by N and v:
-    512^2 10 m/s (4.02e4, 111); 1024^2 0.01 m/s (4.6e3, 6.37), 1 m/s (3.9e4, 54), 10 m/s (1.08e5, 149);
-    2048^2 0.1 m/s (3.67e4, 25.3), 1 m/s (1.07e5, 74.2), 100 m/s (5.9e5: above contact_step_range_max,
-    whatever its modulus range); 4096^2 0.01 m/s (3.45e4,
-    11.9), 0.1 m/s (1.02e5, 35.2), 1 m/s (2.93e5, 101), 10 m/s (7.31e5, 253) [RESULTS.md]."""
+def test_step_area_by_modulus_range():
+    """contact_step_area_large where the modulus range exceeds contact_step_modulus_large; else
+    contact_step_area_small where it is at most contact_step_modulus_max on grids of at least
+    contact_step_min_n.  The paper's compound, the modulus range by N and v: 512^2 10 m/s (111), 100 m/s
+    (272); 1024^2 0.01 m/s (6.37), 1 m/s (54), 10 m/s (149), 100 m/s (338); 2048^2 0.1 m/s (25.3), 1 m/s
+    (74.2), 30 m/s (289), 100 m/s (407); 4096^2 0.01 m/s (11.9), 0.1 m/s (35.2), 1 m/s (101), 3 m/s
+    (161), 10 m/s (253), 30 m/s (356) [RESULTS.md]."""
     s = SolverSettings()
-    assert (s.contact_step_area, s.contact_step_area_large, s.contact_step_range_max) == (0.3, 0.2, 4e5)
+    assert (s.contact_step_area, s.contact_step_area_large, s.contact_step_modulus_large) == (0.3, 0.2, 300.0)
     assert (s.contact_step_area_small, s.contact_step_modulus_max, s.contact_step_min_n) == (0.6, 60.0, 1024)
-    assert s.step_area(2.93e5, 101, 4096) == s.step_area(1.07e5, 74.2, 2048) == s.step_area(4e5, 60.01, 4096) == 0.3
-    assert s.step_area(1.71e3, 4.74, 512) == s.step_area(4.02e4, 111, 512) == s.step_area(1.08e5, 149, 1024) == 0.3
-    assert s.step_area(4.0001e5, 1.0, 4096) == s.step_area(5.9e5, 300, 2048) == s.step_area(7.31e5, 253, 4096) == 0.2
-    assert s.step_area(4.6e3, 6.37, 1024) == s.step_area(3.9e4, 54, 1024) == s.step_area(3.67e4, 25.3, 2048) == 0.6
-    assert s.step_area(3.45e4, 11.9, 4096) == s.step_area(1.02e5, 35.2, 4096) == s.step_area(4e5, 60.0, 8192) == 0.6
-    assert SolverSettings(contact_step_range_max=1e6).step_area(7.31e5, 253, 4096) == 0.3
-    assert SolverSettings(contact_step_min_n=512).step_area(4.02e4, 40.0, 512) == 0.6
-    assert SolverSettings(contact_step_modulus_max=0.0).step_area(1.0, 1.0, 4096) == 0.3
+    assert s.step_area(101, 4096) == s.step_area(74.2, 2048) == s.step_area(60.01, 4096) == 0.3
+    assert s.step_area(4.74, 512) == s.step_area(111, 512) == s.step_area(272, 512) == s.step_area(149, 1024) == 0.3
+    assert s.step_area(161, 4096) == s.step_area(253, 4096) == s.step_area(289, 2048) == s.step_area(300, 8192) == 0.3
+    assert s.step_area(300.01, 512) == s.step_area(338, 1024) == s.step_area(407, 2048) == s.step_area(356, 4096) == 0.2
+    assert s.step_area(6.37, 1024) == s.step_area(54, 1024) == s.step_area(25.3, 2048) == 0.6
+    assert s.step_area(11.9, 4096) == s.step_area(35.2, 4096) == s.step_area(1.0, 4096) == s.step_area(60.0, 8192) == 0.6
+    assert SolverSettings(contact_step_modulus_large=400).step_area(356, 4096) == 0.3
+    assert SolverSettings(contact_step_modulus_large=50).step_area(54, 1024) == 0.2
+    assert SolverSettings(contact_step_min_n=512).step_area(40.0, 512) == 0.6
+    assert SolverSettings(contact_step_modulus_max=0.0).step_area(1.0, 4096) == 0.3
     assert s.widest_step_area(4096) == 0.6 and s.widest_step_area(512) == 0.3
 
 

@@ -29,7 +29,7 @@ def test_tighten_steps(changes, residuals, tighter):
 
 def test_choose_step():
     n = 64.0 ** 2
-    area = S.step_area(1.0, 1.0, 64)
+    area = S.step_area(1.0, 64)
     assert choose_step("auto", int(area * n), n, area) == "contact"
     assert choose_step("auto", int(area * n) + 1, n, area) == "free"
     assert choose_step("contact", n, n, area) == "contact" and choose_step("free", 1, n, area) == "free"

@@ -184,23 +184,23 @@ def test_auto_step_mode_follows_contact_area():
     assert abs(forced.area - high.area) <= 1.0 / N ** 2 and abs(forced.mu - high.mu) <= 1e-6 * high.mu
 
 
-def test_step_area_large_applies_by_the_operators_stiffness_range():
+def test_step_area_large_applies_by_the_operators_modulus_range():
     """The steps switch at contact_step_area_large (0 here: free-set steps at any area) where the
-    stiffness range, max|m_q|/min|m_q| of the solve's own operator, exceeds contact_step_range_max;
-    the solution is the same either way."""
+    modulus range, max|E(q_x v)|/min|E(q_x v)| of the solve's own operator, exceeds
+    contact_step_modulus_large; the solution is the same either way."""
     from vecontact.solver.operator import ContactOperator
     problem = _step_mode_problem()
     fft, L, h, mod, v = problem
     N, sigma0 = fft.N, 300.0
-    stiffness_range = ContactOperator(fft, L, mod, v, sigma0, h).stiffness_range()
-    assert 10.0 < stiffness_range < 1e6
+    modulus_range = ContactOperator(fft, L, mod, v, sigma0, h).modulus_range()
+    assert 1.5 < modulus_range < 1e3
 
-    def run(range_max):
+    def run(modulus_large):
         return _solve_step_modes(problem, sigma0, vc_contact_step_area_large=0.0,
-                                 vc_contact_step_range_max=range_max)
+                                 vc_contact_step_modulus_large=modulus_large)
 
-    below, modes_below = run(1.01 * stiffness_range)
-    above, modes_above = run(0.99 * stiffness_range)
+    below, modes_below = run(1.01 * modulus_range)
+    above, modes_above = run(0.99 * modulus_range)
     assert modes_below == {"contact"} and modes_above == {"free"}
     assert abs(below.area - above.area) <= 1.0 / N ** 2 and abs(below.mu - above.mu) <= 1e-6 * above.mu
 
@@ -208,8 +208,7 @@ def test_step_area_large_applies_by_the_operators_stiffness_range():
 def test_step_area_small_applies_by_grid_size_and_modulus_range():
     """contact_step_area_small (1 here: contact-set steps at any area) where the solve's own operator has
     a modulus range max|E|/min|E| of at most contact_step_modulus_max on a grid of at least
-    contact_step_min_n, whatever its stiffness range up to contact_step_range_max; the solution is the
-    same either way."""
+    contact_step_min_n; the solution is the same either way."""
     from vecontact.solver.operator import ContactOperator
     from vecontact.solver.settings import SolverSettings
     problem = _step_mode_problem()
@@ -219,7 +218,7 @@ def test_step_area_small_applies_by_grid_size_and_modulus_range():
     modulus_range, stiffness_range = op.modulus_range(), op.stiffness_range()
     # a viscoelastic range, well below the stiffness's (which holds the grid's q range too)
     assert 1.5 < modulus_range < stiffness_range / 10.0
-    assert stiffness_range < SolverSettings().contact_step_range_max
+    assert modulus_range < SolverSettings().contact_step_modulus_large
 
     def run(modulus_max, min_n):
         return _solve_step_modes(problem, sigma0, vc_contact_step_area_small=1.0,

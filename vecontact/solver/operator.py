@@ -145,8 +145,8 @@ class ContactOperator:
 
     def stiffness_range(self):
         """max |m_q| / min |m_q| over the grid's q != 0 (collective on the first call): how far float32
-        rounding of a gap is amplified by the stiffness (single.py), and how ill-conditioned the
-        contact-set steps are (SolverSettings.step_area, with modulus_range)."""
+        rounding of a gap is amplified by the stiffness (single.py) and the policies that follow from
+        it (SolverSettings.cycle_cap, pc_range_max, single_range_max)."""
         lo, hi = self.stiffness_bounds()
         return hi / lo if hi > 0 else 1.0
 

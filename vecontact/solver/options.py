@@ -34,9 +34,12 @@ _RECYCLING = "removed with the Krylov recycling of the contact-set steps (it los
 RETIRED = {
     ("contact_step", None): f"renamed -{PREFIX}contact_step",
     ("contact_step_area", None): f"renamed -{PREFIX}contact_step_area (-{PREFIX}contact_step_area_large "
-                                 f"above -{PREFIX}contact_step_range_max)",
+                                 f"above -{PREFIX}contact_step_modulus_large)",
     (f"{PREFIX}contact_step_large_n", None): f"removed: -{PREFIX}contact_step_area_large applies by the "
-                                             f"stiffness's range, -{PREFIX}contact_step_range_max",
+                                             f"range of |E(q_x v)|, -{PREFIX}contact_step_modulus_large",
+    (f"{PREFIX}contact_step_range_max", None): f"replaced by -{PREFIX}contact_step_modulus_large (300): "
+                                               f"contact_step_area_large applies by the range of |E(q_x v)|, "
+                                               f"not of the stiffness (benchmarks/RESULTS.md)",
     (f"{PREFIX}contact_step_range_min", None): f"replaced by -{PREFIX}contact_step_modulus_max (60): "
                                                f"contact_step_area_small applies by the range of |E(q_x v)|, "
                                                f"not of the stiffness (benchmarks/RESULTS.md)",

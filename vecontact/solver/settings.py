@@ -62,10 +62,10 @@ class SolverSettings:
     contact_step: str = _knob("auto", "auto (by contact_step_area), contact or free (free-set steps)",
                               choices=("auto", "contact", "free"))
     contact_step_area: float = _knob(0.3, "auto: contact-set steps up to this A/A0 [RESULTS.md]", lo=0, hi=1)
-    contact_step_area_large: float = _knob(0.2, "auto: the same where max|m_q|/min|m_q| > contact_step_range_max "
+    contact_step_area_large: float = _knob(0.2, "auto: the same where max|E|/min|E| > contact_step_modulus_large "
                                            "[RESULTS.md]", lo=0, hi=1)
-    contact_step_range_max: float = _knob(4e5, "stiffness range above which contact_step_area_large applies "
-                                          "[RESULTS.md]", lo=0)
+    contact_step_modulus_large: float = _knob(300.0, "range of |E(q_x v)| over the grid above which "
+                                              "contact_step_area_large applies [RESULTS.md]", lo=0)
     contact_step_area_small: float = _knob(0.6, "auto: the same on grids of N >= contact_step_min_n where "
                                            "max|E|/min|E| <= contact_step_modulus_max [RESULTS.md]", lo=0, hi=1)
     contact_step_modulus_max: float = _knob(60.0, "range of |E(q_x v)| over the grid up to which "
@@ -161,26 +161,26 @@ class SolverSettings:
             raise ValueError(f"bearing_area_min {self.bearing_area_min} > bearing_area_max {self.bearing_area_max}")
 
     # ------------------------------------------------------------------ derived values
-    def step_area(self, stiffness_range, modulus_range, n):
+    def step_area(self, modulus_range, n):
         """A/A0 up to which ``contact_step auto`` solves Newton steps on the contact set of an n x n grid
-        whose stiffness has the range max|m_q|/min|m_q| (ContactOperator.stiffness_range; it grows with
-        N and with the speed) and whose modulus has the range max|E|/min|E| over the grid's q_x
-        (ContactOperator.modulus_range; it grows with the speed, and with N only as the rubber's
-        frequencies do): at high stiffness range the contact set wanders between the steps solved on
-        it; at a low modulus range on large grids the contact-set steps take fewer FFT pairs than the
-        free set's at any area, and their own work per iteration (edge correction, halos) weighs
+        whose modulus has the range max|E|/min|E| over the grid's q_x (ContactOperator.modulus_range; it
+        grows with the speed, and with N only as the rubber's frequencies do): at a high modulus range
+        the contact set wanders between the steps solved on it, whatever the grid (the stiffness's
+        range, which also holds the grid's q range, did not place the switch on both 2048^2 and
+        4096^2); at a low modulus range on large grids the contact-set steps take fewer FFT pairs than
+        the free set's at any area, and their own work per iteration (edge correction, halos) weighs
         little beside a pair."""
-        if stiffness_range > self.contact_step_range_max:
+        if modulus_range > self.contact_step_modulus_large:
             return self.contact_step_area_large
         if modulus_range <= self.contact_step_modulus_max and n >= self.contact_step_min_n:
             return self.contact_step_area_small
         return self.contact_step_area
 
     def widest_step_area(self, n):
-        """The largest A/A0 step_area gives an n x n grid at any stiffness and modulus range (the contact
+        """The largest A/A0 step_area gives an n x n grid at any modulus range (the contact
         set a contact-set step may be solved on, whatever the speed: farm.memory)."""
-        return max(self.step_area(r, e, n) for r in (0.0, self.contact_step_range_max, math.inf)
-                   for e in (1.0, math.inf))
+        return max(self.step_area(e, n) for e in (1.0, self.contact_step_modulus_max,
+                                                   self.contact_step_modulus_large, math.inf))
 
     def stall(self):
         """SingleGMRES.solve's ``stall`` of the float32-basis steps: (single_stall_reduction,

@@ -112,8 +112,7 @@ class _Semismooth:
         change = st.update_active_set()
         self.lin_history.append(self.linear_iterations(snes))
         mode = choose_step(self.settings.contact_step, st.nact, st.n_points,
-                           self.settings.step_area(st.op.stiffness_range(), st.op.modulus_range(),
-                                                   st.op.N))
+                           self.settings.step_area(st.op.modulus_range(), st.op.N))
         step = self.steps[mode]
         if mode != self.mode:
             step.activate(self.ksp)
