@@ -133,6 +133,8 @@ def test_step_area_by_modulus_range():
     assert SolverSettings(contact_step_min_n=512).step_area(40.0, 512) == 0.6
     assert SolverSettings(contact_step_modulus_max=0.0).step_area(1.0, 4096) == 0.3
     assert s.widest_step_area(4096) == 0.6 and s.widest_step_area(512) == 0.3
+    # modulus_max below 1: the small-area rule never applies, so no wider set (as before session 66)
+    assert SolverSettings(contact_step_modulus_max=0.0).widest_step_area(4096) == 0.3
 
 
 def test_cycle_cap_by_stiffness_range():

@@ -178,9 +178,10 @@ class SolverSettings:
 
     def widest_step_area(self, n):
         """The largest A/A0 step_area gives an n x n grid at any modulus range (the contact
-        set a contact-set step may be solved on, whatever the speed: farm.memory)."""
+        set a contact-set step may be solved on, whatever the speed: farm.memory): the range at each
+        of its bounds and beyond, never below 1 (max|E|/min|E| is at least 1)."""
         return max(self.step_area(e, n) for e in (1.0, self.contact_step_modulus_max,
-                                                   self.contact_step_modulus_large, math.inf))
+                                                   self.contact_step_modulus_large, math.inf) if e >= 1.0)
 
     def stall(self):
         """SingleGMRES.solve's ``stall`` of the float32-basis steps: (single_stall_reduction,
