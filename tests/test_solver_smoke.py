@@ -5,9 +5,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from vecontact.core.pages import huge_page_advice
 from vecontact.core.pfft import SlabFFT
 from vecontact.physics.modulus import Elastic, HavriliakNegami, SLS
 from vecontact.solver import ContactResult, solve_contact
+from vecontact.solver.settings import SolverSettings
 
 COMM = MPI.COMM_SELF
 
@@ -171,7 +173,6 @@ def _solve_step_modes(problem, sigma0, **opts):
 def test_auto_step_mode_follows_contact_area():
     """contact_step auto: contact-set Newton steps while A/A0 <= SolverSettings.step_area (0.3 on this
     grid), free-set steps above; both give the same solution."""
-    from vecontact.solver.settings import SolverSettings
     CONTACT_STEP_AREA = SolverSettings().contact_step_area
     problem = _step_mode_problem()
     N = problem[0].N
@@ -210,7 +211,7 @@ def test_step_area_small_applies_by_grid_size_and_modulus_range():
     a modulus range max|E|/min|E| of at most contact_step_modulus_max on a grid of at least
     contact_step_min_n; the solution is the same either way."""
     from vecontact.solver.operator import ContactOperator
-    from vecontact.solver.settings import SolverSettings
+
     problem = _step_mode_problem()
     fft, L, h, mod, v = problem
     N, sigma0 = fft.N, 1e4
@@ -288,6 +289,79 @@ def test_one_blas_thread_during_the_solve():
         assert set(blas_threads()) == {2}        # given back
     assert r.converged and seen
     assert all(set(s) == {1} for s in seen)
+
+
+def _huge_page_advice():
+    """numpy's current madvise(MADV_HUGEPAGE) choice for new arrays (read by setting it back)."""
+    advise = np._core.multiarray._set_madvise_hugepage
+    now = advise(True)
+    advise(now)
+    return now
+
+
+@pytest.mark.parametrize("caller", [True, False])
+@pytest.mark.parametrize("how, during", [(None, False), ("option", True), ("settings", True)])
+def test_huge_page_advice_during_the_solve(caller, how, during):
+    """solve_contact allocates without numpy's huge-page advice by default (-vc_huge_pages off: its
+    churn of large blocks costs a fault per 2 MiB page; RESULTS.md, "Huge pages"); with "on" it keeps
+    the caller's choice.  Either way the caller's choice is back after the solve."""
+    advise = np._core.multiarray._set_madvise_hugepage
+    seen = []
+    fft = _fft(32)
+    h = _random_surface(fft, 1e-4)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, 0.5)
+    kw = {"option": dict(petsc_options={"vc_huge_pages": "on"}),
+          "settings": dict(settings=SolverSettings(huge_pages="on"))}.get(how, {})
+    before = advise(caller)
+    try:
+        r = solve_contact(fft, 1e-4, h, mod, 1.0, 2e5, monitor=lambda n, it, res: seen.append(_huge_page_advice()),
+                          **kw)
+        assert _huge_page_advice() is caller      # given back
+    finally:
+        advise(before)
+    assert r.converged and seen
+    assert set(seen) == {caller if during else False}
+
+
+def test_huge_page_advice_is_restored_and_fft_buffers_ask_for_huge_pages():
+    """core/pages.py sets numpy's advice for its block and restores the caller's, also on an exception;
+    a SlabFFT made under advice off asks for huge pages for its own long-lived buffers and leaves the
+    caller's advice as it was."""
+    advise = np._core.multiarray._set_madvise_hugepage
+    before = advise(True)
+    try:
+        for outer in (True, False):
+            advise(outer)
+            for inner in (True, False):
+                with huge_page_advice(inner):
+                    assert _huge_page_advice() is inner
+                assert _huge_page_advice() is outer
+            with pytest.raises(RuntimeError):
+                with huge_page_advice(not outer):
+                    raise RuntimeError
+            assert _huge_page_advice() is outer
+        seen = []
+        real = advise
+
+        def spy(flag):
+            seen.append(flag)
+            return real(flag)
+        np._core.multiarray._set_madvise_hugepage = spy
+        try:
+            advise(False)
+            SlabFFT(COMM, 16, planner="estimate", wisdom_file=False)
+        finally:
+            np._core.multiarray._set_madvise_hugepage = real
+        assert seen[0] is True and seen[-1] is False       # on for its buffers, then the caller's off back
+        assert _huge_page_advice() is False
+    finally:
+        advise(before)
+
+
+def test_huge_pages_option_is_checked():
+    assert SolverSettings().huge_pages == "off"
+    with pytest.raises(ValueError, match="huge_pages"):
+        SolverSettings().with_options({"vc_huge_pages": "yes"})
 
 
 def test_a_solve_leaves_the_collectors_freeze_as_it_found_it():

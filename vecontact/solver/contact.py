@@ -1,12 +1,14 @@
 """``solve_contact``: the entry point of the exact numerical solver (see package docstring)."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from vecontact.core.pages import huge_page_advice
 from vecontact.solver.operator import ContactOperator, is_elastic_on_grid
 from vecontact.solver.options import parse, solver_items
 from vecontact.solver.pk import pk_solve
@@ -32,18 +34,23 @@ def _check_warm(warm, fft):
     return st
 
 
-def _one_blas_thread(solve):
-    """Run ``solve`` with one BLAS thread, then give the BLAS back its threads: under mpiexec numpy's
-    OpenBLAS otherwise starts a thread per core in every rank, and a 2-rank 1024^2 solve took 4.5x as
-    long (benchmarks/RESULTS.md, "BLAS threads")."""
+def _solve_environment(solve):
+    """Run ``solve`` with one BLAS thread and, unless its settings' huge_pages is "on", without numpy's
+    huge-page advice (core/pages.py), then give both back.  Under mpiexec numpy's OpenBLAS otherwise
+    starts a thread per core in every rank, and a 2-rank 1024^2 solve took 4.5x as long (RESULTS.md,
+    "BLAS threads").  A solve allocates and frees its Krylov bases and step scratch again and again;
+    with 2 MiB pages each new block faults in anew: 4 KiB pages took 0.69-0.96x the seconds of the
+    benchmark's cases, grid by grid (RESULTS.md, "Huge pages")."""
     @functools.wraps(solve)
-    def one_thread(*args, **kwargs):
-        with threadpool_limits(limits=1, user_api="blas"):
-            return solve(*args, **kwargs)
-    return one_thread
+    def in_environment(*args, settings=None, petsc_options=None, **kwargs):
+        cfg = (settings or SolverSettings()).with_options(solver_items(parse(petsc_options))[1])
+        pages = huge_page_advice(False) if cfg.huge_pages == "off" else contextlib.nullcontext()
+        with threadpool_limits(limits=1, user_api="blas"), pages:
+            return solve(*args, settings=cfg, petsc_options=petsc_options, **kwargs)
+    return in_environment
 
 
-@_one_blas_thread
+@_solve_environment
 def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, method="snes",
                   petsc_options=None, warm=None, coarse=True, max_iterations=None,
                   store=("pressure", "gap", "displacement"), monitor=None, settings=None):
@@ -75,7 +82,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     settings : SolverSettings (settings.py; default: its defaults), every tuning constant of the solve
 
     Returns a ContactResult; never raises for non-convergence (converged=False, residual, reason).
-    The BLAS runs one thread during the solve, whatever the environment asks for.
+    The BLAS runs one thread during the solve, whatever the environment asks for, and the arrays the
+    solve allocates take 4 KiB pages unless settings.huge_pages is "on".
     """
     t0 = time.perf_counter()
     comm = fft.comm
