@@ -82,8 +82,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     settings : SolverSettings (settings.py; default: its defaults), every tuning constant of the solve
 
     Returns a ContactResult; never raises for non-convergence (converged=False, residual, reason).
-    The BLAS runs one thread during the solve, whatever the environment asks for, and the arrays the
-    solve allocates take 4 KiB pages unless settings.huge_pages is "on".
+    The BLAS runs one thread during the solve, whatever the environment asks for, and numpy does not
+    ask for huge pages for the arrays the solve allocates unless settings.huge_pages is "on".
     """
     t0 = time.perf_counter()
     comm = fft.comm

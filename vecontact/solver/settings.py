@@ -154,8 +154,8 @@ class SolverSettings:
     pk_max_it: int = _knob(20000, "Polonsky-Keer CG iterations (numerics.max_iterations wins)", lo=1)
     elastic_rtol: float = _knob(1e-12, "method pk: |Im E| <= this |E| on every q_x counts as elastic", lo=0)
     # --- the process while it solves (contact.py)
-    huge_pages: str = _knob("off", "off: the arrays a solve allocates take 4 KiB pages (no madvise "
-                            "MADV_HUGEPAGE); on: numpy's own choice [RESULTS.md]", choices=("off", "on"))
+    huge_pages: str = _knob("off", "off: numpy does not ask for huge pages (madvise) for the arrays a solve "
+                            "allocates; on: numpy's own choice [RESULTS.md]", choices=("off", "on"))
 
     def __post_init__(self):
         for f in fields(self):
