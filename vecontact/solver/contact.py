@@ -36,17 +36,20 @@ def _check_warm(warm, fft):
 
 def _solve_environment(solve):
     """Run ``solve`` with one BLAS thread and, unless its settings' huge_pages is "on", without numpy's
-    huge-page advice (core/pages.py), then give both back.  Under mpiexec numpy's OpenBLAS otherwise
-    starts a thread per core in every rank, and a 2-rank 1024^2 solve took 4.5x as long (RESULTS.md,
-    "BLAS threads").  A solve allocates and frees its Krylov bases and step scratch again and again;
-    with 2 MiB pages each new block faults in anew: 4 KiB pages took 0.69-0.96x the seconds of the
-    benchmark's cases, grid by grid (RESULTS.md, "Huge pages")."""
+    huge-page advice (core/pages.py), then give both back.  The settings are resolved here, once
+    (``settings`` with the ``-vc_`` entries of ``petsc_options``): ``solve`` gets them, and PETSc's
+    entries alone as its ``petsc_options``.  Under mpiexec numpy's OpenBLAS otherwise starts a thread
+    per core in every rank, and a 2-rank 1024^2 solve took 4.5x as long (RESULTS.md, "BLAS threads").
+    A solve allocates and frees its Krylov bases and step scratch again and again; with 2 MiB pages
+    each new block faults in anew: 4 KiB pages took 0.69-0.96x the seconds of the benchmark's cases,
+    grid by grid (RESULTS.md, "Huge pages")."""
     @functools.wraps(solve)
     def in_environment(*args, settings=None, petsc_options=None, **kwargs):
-        cfg = (settings or SolverSettings()).with_options(solver_items(parse(petsc_options))[1])
+        options, ours = solver_items(parse(petsc_options))
+        cfg = (settings or SolverSettings()).with_options(ours)
         pages = huge_page_advice(False) if cfg.huge_pages == "off" else contextlib.nullcontext()
         with threadpool_limits(limits=1, user_api="blas"), pages:
-            return solve(*args, settings=cfg, petsc_options=petsc_options, **kwargs)
+            return solve(*args, settings=cfg, petsc_options=options, **kwargs)
     return in_environment
 
 
@@ -96,8 +99,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     if not (tolerance > 0):
         raise ValueError("tolerance must be > 0")
     velocity = float(velocity)
-    options, ours = solver_items(parse(petsc_options))
-    cfg = (settings or SolverSettings()).with_options(ours)
+    options, cfg = petsc_options, settings      # PETSc's entries and the settings: _solve_environment's
     if method == "pk" and not is_elastic_on_grid(fft, L, modulus, velocity, rtol=cfg.elastic_rtol):
         raise ValueError("method 'pk' (Polonsky-Keer) needs an elastic operator: Im E(q_x v) != 0 on "
                          "this grid at this velocity; use method 'snes'")
