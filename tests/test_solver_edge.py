@@ -110,6 +110,24 @@ def test_edge_term_of_a_float32_vector():
     assert np.array_equal(ec.apply(x), ec.apply(x.astype(float)))
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_edge_term_added_in_place_is_the_product(dtype):
+    """add_to (the preconditioner's path: no new array a call) adds exactly np.add(y, apply(x)), the
+    float64 term rounded to y's dtype, twice in a row (its kept product starts from zero each call)."""
+    mod, h, op, act = _case()
+    idx = np.flatnonzero(act.ravel())
+    ec = EdgeCorrection(op, 2, 0.2)
+    ec.build(act, idx)
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        x = rng.standard_normal(idx.size).astype(dtype)
+        y = rng.standard_normal(idx.size).astype(dtype)
+        want = np.add(y, ec.apply(x), out=y.copy(), casting="same_kind")
+        ec.add_to(x, y)
+        assert np.array_equal(y, want)
+        assert np.count_nonzero(ec.apply(x)) > idx.size // 20       # a term that changes y
+
+
 def test_no_edge_in_full_contact():
     """All points in contact: no edge, the term is zero."""
     mod, h, op, act = _case()

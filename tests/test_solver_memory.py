@@ -14,10 +14,11 @@ fine grid's Newton iterations (bytes per grid point; a complex half-spectrum arr
   set), and the scratch through which a product's input takes the 1/N^2 (subset.Grid.product_of; 8 per
   point of the contact set);
 * on the contact set, the preconditioner's edge term (edge.py): its sparse rows S (12 bytes an entry),
-  the correction rows of the window masks met so far, a copy of the set and a C-vector: 16 here, in
-  proportion to the set's edge points.
+  the correction rows of the window masks met so far, a copy of the set and two C-vectors (the
+  halo-extended input and, since session 69, the product ``add_to`` keeps with the set, both 5 %
+  longer: store_headroom): 18 here, in proportion to the set's edge points.
 
-That is 114 (free-set steps, A/A0 0.88) and 151 (contact-set steps, A/A0 0.19).  Before session 37
+That is 114 (free-set steps, A/A0 0.88) and 153 (contact-set steps, A/A0 0.19).  Before session 37
 each step type had its own buffers, m / kappa and kappa c were kept as arrays (three of them), the
 dimensional M and |q| as well, the coarse levels' operators stayed alive through the fine solve (FFTW's
 plans held the last arrays they ran on: SlabFFT.release_arrays), and the result was copied out of the
@@ -46,8 +47,8 @@ DOUBLE_KRYLOV = ("-vc_changing_precision double -vc_cycle_precision double -vc_m
 def test_a_solve_holds_its_inventory_of_arrays(sigma0, mode, area, bound):
     """Traced numpy memory at every Newton iteration of the fine grid, over what was held before the
     call, per grid point: at most the inventory above plus 9 bytes (the small arrays of N-length rows
-    and the coarse levels' sets), so one more whole-grid float64 array (8) fails; measured 154.9 and
-    116.4 (the contact case 138.8 until session 64: with coarse_tol 0.1 its exact step ended on the
+    and the coarse levels' sets), so one more whole-grid float64 array (8) fails; measured 156.6 and
+    116.2 (154.9 and 116.4 before session 69's kept edge product; the contact case 138.8 until session 64: with coarse_tol 0.1 its exact step ended on the
     2-norm cap before the measure stop's first look, which makes its g and p; 130 and 108 before the
     measures' scratch, 226 and 211 before session 37's changes).  A
     first solve makes the caches (coarse SlabFFTs, the float32 twin) outside the measurement."""

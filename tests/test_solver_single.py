@@ -400,3 +400,34 @@ def test_single_gmres_dots_sum_in_double():
     assert np.max(np.abs(gm._dots(V, t) - ref) / scale) < 1e-8
     assert np.max(np.abs(gm._dots(V[:, :12345], t[:12345]) - V[:, :12345].astype(float) @ t[:12345])
                   / scale) < 1e-8                                     # a partial last chunk
+
+
+def test_basis_stores_kept_for_a_few_more_points_and_longer_restarts():
+    """_Single.gmres makes a store for the restart the budget allows (``capacity``) on
+    store_headroom (5 %) more points than asked, and keeps it for later solves that fit: a new store's
+    pages fault in again on first write.  Beyond it (a larger set, or the flexible method's
+    preconditioned vectors in the work store) only the store that is too small is made again."""
+    from vecontact.solver.contactset import ContactSetStep
+    from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.settings import SolverSettings
+    from vecontact.solver.snes import petsc
+
+    fft, h, hn = paper_case(64)
+    op = ContactOperator(fft, L_PAPER, hn, 1.0, 1e5, h)
+    step = ContactSetStep(op, op.kappa, petsc(), "storetest_", SolverSettings())
+    try:
+        sg = step.single_context()
+        stores = lambda: sg._stores["plain"]
+        gm = sg.gmres("plain", 100, 10, _allsum, False, capacity=30)
+        first = stores()
+        assert first[0].size >= SingleGMRES.sizes(105, 30, False)[0] and gm.V.shape == (11, 100)
+        gm = sg.gmres("plain", 104, 30, _allsum, False, capacity=30)
+        assert stores()[0] is first[0] and stores()[1] is first[1] and gm.V.shape == (31, 104)
+        gm = sg.gmres("plain", 104, 30, _allsum, True, capacity=30)       # FGMRES: Z in the work store
+        assert stores()[0] is first[0] and stores()[1] is not first[1] and gm.Z.shape == (30, 104)
+        gm = sg.gmres("plain", 120, 10, _allsum, False, capacity=30)       # fits: entries, not shape
+        assert stores()[0] is first[0] and gm.V.shape == (11, 120)
+        gm = sg.gmres("plain", 120, 30, _allsum, False, capacity=30)       # 20 % more points
+        assert stores()[0] is not first[0] and gm.V.shape == (31, 120)
+    finally:
+        step.release()

@@ -66,7 +66,7 @@ class ContactSetStep(SubsetStep):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings, work)
         self.free = np.zeros(self.shape, dtype=bool)   # the free set F
         w = settings.edge_window
-        self.edge = EdgeCorrection(op, w, settings.edge_drop) if w > 0 else None
+        self.edge = EdgeCorrection(op, w, settings.edge_drop, settings.store_headroom) if w > 0 else None
         self.advance = None     # called (x, s) after each Newton update: NewtonState.advance (snes.py)
         self._kernel = None     # c(x) on every rank, for the map of carried directions (made on first use)
 
@@ -79,7 +79,7 @@ class ContactSetStep(SubsetStep):
         return Restricted(self, self.op.c, self._remove_mean)
 
     def preconditioner(self):
-        local = self.edge.apply if self.edge is not None else None
+        local = self.edge.add_to if self.edge is not None else None
         return Restricted(self, self.op.m, self._remove_mean, local=local)
 
     def step_pc(self):

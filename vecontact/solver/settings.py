@@ -135,6 +135,8 @@ class SolverSettings:
     inner_restart_memory: float = _knob(3e9, "bytes per rank for the inner FGMRES basis [RESULTS.md]", lo=0,
                                         lo_open=True)
     restart_min: int = _knob(10, "no restart below this, whatever the memory", lo=1)
+    store_headroom: float = _knob(0.05, "kept work arrays (float32-basis stores, the edge term's vectors) are made "
+                                  "this much longer than asked, unwritten [RESULTS.md]", lo=0)
     # --- coarse grids and warm starts (contact.py, warmstart.py)
     coarse_min_n: int = _knob(64, "coarsest grid size (N/2, N/4, ... down to this) [RESULTS.md]", lo=2)
     coarse_levels: int = _knob(6, "coarse grids at most (6: down to coarse_min_n up to 4096^2) [RESULTS.md]", lo=0)

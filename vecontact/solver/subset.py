@@ -116,8 +116,8 @@ class Restricted:
     """y = (scale multiplier P_S x)_S, then ``post(y, full)`` with ``full`` the whole-grid product (Python
     Mat and Python PC of the inner KSP).  ``multiplier``: a Fourier multiplier of the SlabFFT; ``scale``:
     a number (SlabFFT.apply: no scaled copy of the multiplier).  ``grid``: the Grid where the product is
-    formed (default the step's float64 one).  ``local``: a term added to y before ``post``, local(x)
-    (a float64 array of y's size, or None for none; contactset.py's edge correction)."""
+    formed (default the step's float64 one).  ``local``: a term added to y before ``post``, local(x, y)
+    adds it (contactset.py's edge correction, EdgeCorrection.add_to)."""
 
     def __init__(self, step, multiplier, post=None, grid=None, scale=1.0, local=None):
         self.step = step
@@ -144,9 +144,7 @@ class Restricted:
         else:                           # take's own casting copies (and casts) y's old contents first
             np.copyto(y, gather(g.out, idx, g.gathered(idx.size)), casting="same_kind")
         if self.local is not None:
-            term = self.local(x)
-            if term is not None:
-                np.add(y, term, out=y, casting="same_kind")
+            self.local(x, y)
         if self.post is not None:
             self.post(y, g.out)
 
@@ -198,13 +196,23 @@ class _Single:
         """Drop the bases' memory (made again by the next single-precision solve)."""
         self._stores = {}
 
-    def gmres(self, slot, n_loc, restart, allsum, flexible):
-        """A SingleGMRES working in the memory of ``slot`` (grown when too small)."""
+    def gmres(self, slot, n_loc, restart, allsum, flexible, capacity=None):
+        """A SingleGMRES working in the memory of ``slot``.  A store too small for it is made again, for
+        the restart ``capacity`` (default ``restart``; one the memory budget allows) on n_loc and
+        SolverSettings.store_headroom more points: a store's pages fault in on first write, and a new
+        store makes every row fault again, where the steps of one grid ask for a few more points or a
+        longer restart each [RESULTS.md].  Pages never written cost no memory; only the store that is
+        too small (basis or work) is made again."""
         need = SingleGMRES.sizes(n_loc, restart, flexible)
-        stores = self._stores.get(slot)
-        if stores is None or any(a.size < n for a, n in zip(stores, need)):
-            self._stores[slot] = None    # free the old blocks first
-            stores = self._stores[slot] = (np.empty(need[0], dtype=np.float32), np.empty(need[1], dtype=self.work))
+        stores = list(self._stores.pop(slot, None) or (None, None))      # the list holds the only references
+        if any(a is None or a.size < n for a, n in zip(stores, need)):
+            room = int(n_loc * (1.0 + self.step.settings.store_headroom)) + 1
+            size = SingleGMRES.sizes(room, max(restart, capacity or 0), flexible)
+            for i, dtype in enumerate((np.float32, self.work)):
+                if stores[i] is None or stores[i].size < need[i]:
+                    stores[i] = None            # free the old block first
+                    stores[i] = np.empty(size[i], dtype=dtype)
+        self._stores[slot] = tuple(stores)
         return SingleGMRES(n_loc, restart, allsum, flexible, self.work, stores[0][:need[0]], stores[1][:need[1]])
 
 
@@ -535,7 +543,10 @@ class SubsetStep:
             if space is not None and not self._unchanged:
                 space = self.map_space(space)
             basis = space.basis(self.fft, self.n_S, self.settings.carry_drop) if space is not None else None
-            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible)
+            # room for the longest restart a flexible solve of this set may take: its two stores then
+            # fill the budget, never more (a step may turn flexible; its exact step does on the free set)
+            room = self.settings.single_restart(n_loc, self.mode, fgmres_vectors)
+            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible, capacity=room)
             A, means = sg.A.matvec, None
             if gm.flexible and self.carries():
                 means = []                      # what P took off each product: the raw products (recycle.py)
