@@ -204,7 +204,7 @@ class _Single:
         longer restart each [RESULTS.md].  Pages never written cost no memory; only the store that is
         too small (basis or work) is made again."""
         need = SingleGMRES.sizes(n_loc, restart, flexible)
-        stores = list(self._stores.pop(slot, None) or (None, None))      # the list holds the only references
+        stores = list(self._stores.pop(slot, None) or (None, None))      # so that a block too small can go
         if any(a is None or a.size < n for a, n in zip(stores, need)):
             room = int(n_loc * (1.0 + self.step.settings.store_headroom)) + 1
             size = SingleGMRES.sizes(room, max(restart, capacity or 0), flexible)
