@@ -48,10 +48,11 @@ def test_a_solve_holds_its_inventory_of_arrays(sigma0, mode, area, bound):
     """Traced numpy memory at every Newton iteration of the fine grid, over what was held before the
     call, per grid point: at most the inventory above plus 9 bytes (the small arrays of N-length rows
     and the coarse levels' sets), so one more whole-grid float64 array (8) fails; measured 156.6 and
-    116.2 (154.9 and 116.4 before session 69's kept edge product; the contact case 138.8 until session 64: with coarse_tol 0.1 its exact step ended on the
-    2-norm cap before the measure stop's first look, which makes its g and p; 130 and 108 before the
-    measures' scratch, 226 and 211 before session 37's changes).  A
-    first solve makes the caches (coarse SlabFFTs, the float32 twin) outside the measurement."""
+    116.2 (154.9 and 116.4 before session 69's kept edge product; the contact case 138.8 until session
+    64: with coarse_tol 0.1 its exact step ended on the 2-norm cap before the measure stop's first
+    look, which makes its g and p; 130 and 108 before the measures' scratch, 226 and 211 before
+    session 37's changes).  A first solve makes the caches (coarse SlabFFTs, the float32 twin)
+    outside the measurement."""
     fft, h, modulus = paper_case(N)
     solve_contact(fft, L_PAPER, h, modulus, 10.0, sigma0, tolerance=1e-4, petsc_options=DOUBLE_KRYLOV)
     held = []

@@ -229,7 +229,6 @@ class EdgeCorrection:
         if a.base is not None:
             a = a.base
         if a.size < n:
-            a = None
             a = np.empty(int(n * (1.0 + self.headroom)) + 1)
         return a[:n]
 
