@@ -627,6 +627,8 @@ def test_q1_option_solves_a_subset_then_the_rest(reference, tmp_path):
     job = write_job(tmp_path / "job.yaml")
     p = vecontact(0, ["run", job, "--q1", "2e6"], cwd=tmp_path)
     assert p.returncode == 0, p.stdout + p.stderr
+    # the lines count to what this run solves, not to the job's 12
+    assert "[6/6] q1=2e+06" in p.stdout and "/12]" not in p.stdout, p.stdout
     part = cases_of(tmp_path / "out.h5")
     assert len(part) == 6 and set(part["q1"]) == {2.0e6} and set(part["N"]) == {64}
     with h5py.File(tmp_path / "out.h5", "r") as f:
@@ -634,6 +636,7 @@ def test_q1_option_solves_a_subset_then_the_rest(reference, tmp_path):
     p = vecontact(0, ["run", job], cwd=tmp_path)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "6 already finished, 6 to solve" in p.stdout
+    assert "[ 7/12] q1=4e+06" in p.stdout and "[12/12] q1=4e+06" in p.stdout, p.stdout
     assert_same_results(ref, cases_of(tmp_path / "out.h5"))
     bad = vecontact(0, ["run", job, "--q1", "3e6"], cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.strip().splitlines() == [

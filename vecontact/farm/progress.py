@@ -39,10 +39,13 @@ def pressure_places(cases):
 
 class Progress:
     """Per-case progress lines of one run: ``cases`` of the job, the ``chains`` left to solve (their
-    grids), ``nranks`` ranks that compute; lines go to ``out`` (stdout)."""
+    grids), ``nranks`` ranks that compute; lines go to ``out`` (stdout).  ``total``: the count the
+    run's last line reaches, the file's finished cases plus this run's (``run --q1`` solves a part of
+    the job); None: all the job's cases."""
 
-    def __init__(self, cases, chains, nranks=1, out=None):
+    def __init__(self, cases, chains, nranks=1, out=None, total=None):
         self.cases = cases
+        self.total = len(cases) if total is None else int(total)
         self.nranks = max(1, nranks)
         self.out = out if out is not None else sys.stdout
         self.place = pressure_places(cases)
@@ -88,10 +91,10 @@ class Progress:
     def line(self, idx, row, reason="", ndone=0):
         """``[ndone/total] q1=... ETA H:MM:SS`` for case ``idx``, flagged when it did not converge."""
         c = self.cases[idx]
-        w = len(str(len(self.cases)))
+        w = len(str(self.total))
         ok = int(row["status"]) == CONVERGED
         flag = "" if ok else f"  NOT CONVERGED (residual {float(row['residual']):.2e}{', ' + reason if reason else ''})"
-        return (f"[{ndone:{w}d}/{len(self.cases)}] q1={c.q1:.4g} seed={c.seed} v={c.velocity:.4g} "
+        return (f"[{ndone:{w}d}/{self.total}] q1={c.q1:.4g} seed={c.seed} v={c.velocity:.4g} "
                 f"p={c.pressure:.4g}  A/A0={float(row['area']):.5f} mu={float(row['mu']):.5f} "
                 f"it={int(row['iterations'])} {float(row['seconds']):.2f}s N={int(row['N'])}x{int(row['ranks'])}r"
                 f"  ETA {hms(self.eta())}{flag}")

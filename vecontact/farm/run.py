@@ -103,7 +103,7 @@ def run_numerics(job, comm, writer, cases, rows, psds, quiet=False, petsc_args=(
     hub = coord = None
     if rank == 0:
         ndone = len(writer.done()) if writer is not None else 0
-        report = None if quiet else progress.Progress(cases, chains, nranks=nwork)
+        report = None if quiet else progress.Progress(cases, chains, nranks=nwork, total=ndone + int(todo.sum()))
         coord = Coordinator(chains, cases, writer, ndone=ndone, progress=report)
         hub = Hub(coord, ctl, comm)
         if not quiet:
