@@ -536,17 +536,18 @@ class SubsetStep:
         # preconditioned one in the work precision
         fgmres_vectors = (4 + np.dtype(sg.work).itemsize) / 8
         if k == 1:
-            vectors = fgmres_vectors if self.flexible else 0.5
-            restart = self.comm.allreduce(self.settings.single_restart(n_loc, self.mode, vectors), op=MPI.MIN)
+            # the longest restart a flexible solve of this set may take: the stores are made for it, so
+            # both fill the budget, never more (a step may turn flexible; its exact step does on the free set)
+            flexible_restart = self.settings.single_restart(n_loc, self.mode, fgmres_vectors)
+            own = flexible_restart if self.flexible else self.settings.single_restart(n_loc, self.mode, 0.5)
+            restart = self.comm.allreduce(own, op=MPI.MIN)
             if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
             if space is not None and not self._unchanged:
                 space = self.map_space(space)
             basis = space.basis(self.fft, self.n_S, self.settings.carry_drop) if space is not None else None
-            # room for the longest restart a flexible solve of this set may take: its two stores then
-            # fill the budget, never more (a step may turn flexible; its exact step does on the free set)
-            room = self.settings.single_restart(n_loc, self.mode, fgmres_vectors)
-            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible, capacity=room)
+            gm = sg.gmres("plain", n_loc, min(restart, max_it), allsum, flexible=self.flexible,
+                          capacity=flexible_restart)
             A, means = sg.A.matvec, None
             if gm.flexible and self.carries():
                 means = []                      # what P took off each product: the raw products (recycle.py)
