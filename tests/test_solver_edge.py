@@ -63,6 +63,7 @@ def test_edge_rows_are_the_local_inverses(w, drop):
     G = np.column_stack([ec.apply(e) for e in np.eye(idx.size)])
     ref = _dense_rows(mod, op, act, w, drop)
     assert 0 < len(ref) < idx.size
+    assert ec.S.shape[0] == len(ref)       # S keeps a row for each edge point only
     for k, i in enumerate(idx):
         got = {int(idx[j]): G[k, j] for j in np.flatnonzero(G[k])}
         want = ref.get(int(i), {})

@@ -30,6 +30,8 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from scipy.sparse import _sparsetools
 
+from vecontact.solver.subset import gather
+
 __all__ = ["EdgeCorrection"]
 
 
@@ -63,6 +65,7 @@ class EdgeCorrection:
         self._rows = np.zeros((0, self.da.size))             # their correction rows
         self.S = None
         self._x = self._term = np.zeros(0)
+        self._on_rows = {}                                   # add_to's y on the edge rows, by dtype
         self._act = None                                     # the contact set of the last build
 
     # ------------------------------------------------------------------ set-up
@@ -199,20 +202,21 @@ class EdgeCorrection:
         kept_off = offsets.astype(at_kind)[np.nonzero(keep)[1]]   # every mask's kept entries, in order
         which = np.searchsorted(uniq, codes)
         count = per_mask[which]
-        indptr = np.zeros(idx.size + 1, dtype=np.int32)
-        rows_at = pos[base]                                   # the edge points' rows of S
-        indptr[rows_at + 1] = count
-        np.cumsum(indptr, out=indptr)         # int32: S has far fewer than 2**31 entries on a rank
+        # S has a row per edge point only (the rest of C has no term): a product need not pass over
+        # |C| rows, nor an add over |C| entries [RESULTS.md]
+        indptr = np.zeros(edge.size + 1, dtype=np.int32)
+        np.cumsum(count, out=indptr[1:])      # int32: S has far fewer than 2**31 entries on a rank
         # entry j of S: kept entry src[j] (of its row's mask), at its row's point plus the entry's offset
-        src = np.arange(indptr[-1], dtype=np.int32) - np.repeat(indptr[rows_at] - first[which], count)
+        src = np.arange(indptr[-1], dtype=np.int32) - np.repeat(indptr[:-1] - first[which], count)
         at = np.repeat(base.astype(at_kind), count)
         at += kept_off[src]
-        self.S = sp.csr_matrix((vals[keep][src], pos[at], indptr), shape=(idx.size, idx.size + n_prev + n_next))
+        self.S = sp.csr_matrix((vals[keep][src], pos[at], indptr), shape=(edge.size, idx.size + n_prev + n_next))
+        self._edge_rows = pos[base].astype(np.intp)          # the edge points' C positions (ascending)
         # the halo plan: local contact points in the first and last w rows, and where theirs go
         self._first = int(np.searchsorted(idx, w * N))
         self._last = int(idx.size - np.searchsorted(idx, (n - w) * N))
         self._x = self._room(self._x, idx.size + n_prev + n_next)
-        self._term = self._room(self._term, idx.size)     # add_to's product
+        self._term = self._room(self._term, edge.size)    # add_to's product
         self._n = idx.size
         self._n_prev = n_prev
 
@@ -223,29 +227,35 @@ class EdgeCorrection:
         self._halo(xe[:self._first], xe[n - self._last:n], xe[n:n + self._n_prev], xe[n + self._n_prev:])
         return xe
 
-    def _room(self, a, n):
-        """``a``'s first n entries, or a new array with headroom when it is shorter: the next sets'
-        sizes differ by a little, and a new array's pages fault in again."""
-        if a.base is not None:
+    def _room(self, a, n, dtype=np.float64):
+        """``a``'s first n entries, or a new array (of ``dtype``) with headroom when it is shorter or
+        None: the next sets' sizes differ by a little, and a new array's pages fault in again."""
+        if a is not None and a.base is not None:
             a = a.base
-        if a.size < n:
-            a = np.empty(int(n * (1.0 + self.headroom)) + 1)
+        if a is None or a.size < n:
+            a = np.empty(int(n * (1.0 + self.headroom)) + 1, dtype=dtype)
         return a[:n]
 
     def apply(self, x):
         """The edge term (float64, C-vector) of the C-vector ``x`` (any float dtype); None without one."""
         if self.S is None:
             return None
-        return self.S @ self._extended(x)
+        term = np.zeros(self._n)
+        term[self._edge_rows] = self.S @ self._extended(x)
+        return term
 
     def add_to(self, x, y):
         """y += the edge term of the C-vector ``x`` (y of any float dtype: the float64 term rounded to
-        it, as np.add(y, apply(x), out=y) does, bit for bit); nothing without a term.  The product goes
-        into an array kept with the set: a large grid's new array a call cost its page faults, half
-        of the product's time on a 4096² grid [RESULTS.md]."""
+        it, as np.add(y, apply(x), out=y) does, bit for bit); nothing without a term.  The product,
+        and y's values on the edge rows, go into arrays kept with the set: a large grid's new array a
+        call cost its page faults, half of the product's time on a 4096² grid [RESULTS.md]."""
         if self.S is None:
             return
-        S, t = self.S, self._term
+        S, t, rows = self.S, self._term, self._edge_rows
         t.fill(0.0)                     # csr_matvec adds to its output, as S @ x's own zeros
         _sparsetools.csr_matvec(S.shape[0], S.shape[1], S.indptr, S.indices, S.data, self._extended(x), t)
-        np.add(y, t, out=y, casting="same_kind")
+        kept = self._on_rows.get(y.dtype)
+        kept = self._on_rows[y.dtype] = self._room(kept, rows.size, y.dtype)
+        gather(y, rows, kept)
+        np.add(kept, t, out=kept, casting="same_kind")
+        y[rows] = kept
