@@ -246,7 +246,8 @@ class EdgeCorrection:
 
     def add_to(self, x, y):
         """y += the edge term of the C-vector ``x`` (y of any float dtype: the float64 term rounded to
-        it, as np.add(y, apply(x), out=y) does, bit for bit); nothing without a term.  The product,
+        it, as np.add(y, apply(x), out=y) does, bit for bit on the edge rows; y elsewhere is left as it
+        is, where that add would turn a -0.0 into 0.0); nothing without a term.  The product,
         and y's values on the edge rows, go into arrays kept with the set: a large grid's new array a
         call cost its page faults, half of the product's time on a 4096² grid [RESULTS.md]."""
         if self.S is None:
