@@ -18,9 +18,10 @@ contact set), positive definite in the elastic case, non-symmetric but coercive 
 modulus.  It is preconditioned by the restricted stiffness B = P m_CC P (the opposite-order, "Calderon"
 preconditioner: m and c are exact inverses on the full grid, the restriction only perturbs it near the
 contact edges, so the iteration count grows only mildly with N).  At the edges B gets a local
-correction, a sparse term from small dense inverses of c on windows (edge.py; SolverSettings.edge_window,
-0: none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
-orthogonalisation costs little next to the FFTs.
+correction, a sparse term from small dense inverses of c on windows (edge.py; their half width
+SolverSettings.edge_half_width, by the set's size and the modulus's range; 0: none).  The Krylov
+vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little
+next to the FFTs.
 
 A changing step's inner solve starts from the last step's directions, their products mapped to the new
 set with c's kernel columns of the points that changed (recycle.py, SolverSettings.carry_map_cost;
@@ -65,8 +66,8 @@ class ContactSetStep(SubsetStep):
     def __init__(self, op, kappa, PETSc, prefix, settings, work=None):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings, work)
         self.free = np.zeros(self.shape, dtype=bool)   # the free set F
-        w = settings.edge_window
-        self.edge = EdgeCorrection(op, w, settings.edge_drop, settings.store_headroom) if w > 0 else None
+        self.edge = None        # the edge term of the current set (set_active): one of _edges, or None
+        self._edges = {}        # EdgeCorrection by half width, made on first use (one FFT pair each)
         self.advance = None     # called (x, s) after each Newton update: NewtonState.advance (snes.py)
         self._kernel = None     # c(x) on every rank, for the map of carried directions (made on first use)
 
@@ -79,8 +80,12 @@ class ContactSetStep(SubsetStep):
         return Restricted(self, self.op.c, self._remove_mean)
 
     def preconditioner(self):
-        local = self.edge.add_to if self.edge is not None else None
+        local = self._edge_term if self.settings.edge_window > 0 else None
         return Restricted(self, self.op.m, self._remove_mean, local=local)
+
+    def _edge_term(self, x, y):
+        if self.edge is not None:
+            self.edge.add_to(x, y)
 
     def step_pc(self):
         """B, with float32 pairs where the inner KSP is vecontact's FGMRES and float32_pc() holds: a
@@ -128,6 +133,7 @@ class ContactSetStep(SubsetStep):
     def release(self):
         super().release()
         self.edge = self.advance = self._kernel = None
+        self._edges = {}
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
@@ -140,6 +146,11 @@ class ContactSetStep(SubsetStep):
             raise ValueError("empty contact set")
         np.logical_not(act, out=self.free)
         self.select(np.flatnonzero(act.ravel()), n_active)
+        st = self.settings
+        w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2)
+        if w > 0 and w not in self._edges:
+            self._edges[w] = EdgeCorrection(self.op, w, st.edge_drop, st.store_headroom)
+        self.edge = self._edges.get(w)
         if self.edge is not None:
             self.edge.build(act, self.idx)
 

@@ -117,6 +117,11 @@ class SolverSettings:
                              "correction (edge.py; 0: none) [RESULTS.md]", lo=0, hi=3)
     edge_drop: float = _knob(0.2, "... its entries below this fraction of their row's largest are dropped [RESULTS.md]",
                              lo=0, hi=1)
+    edge_window_large: int = _knob(1, "... the half width instead on contact sets of at least edge_large_area of the "
+                                   "grid where the modulus's range is at most edge_large_modulus_max (0: none) "
+                                   "[RESULTS.md]", lo=0, hi=3)
+    edge_large_area: float = _knob(0.2, "... that fraction of the grid's points (above 1: never)", lo=0)
+    edge_large_modulus_max: float = _knob(60.0, "... that range of |E(q_x v)| over the grid", lo=0)
     carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
                                   "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
@@ -180,6 +185,18 @@ class SolverSettings:
         if modulus_range <= self.contact_step_modulus_max and n >= self.contact_step_min_n:
             return self.contact_step_area_small
         return self.contact_step_area
+
+    def edge_half_width(self, modulus_range, area):
+        """The half width of the edge correction's windows (edge.py; 0: none) for a contact set holding
+        the fraction ``area`` of the grid's points, on a grid whose modulus has the range max|E|/min|E|
+        over its q_x: edge_window_large on large sets at a low range (slow sliding), where the edges are
+        many and the set moves little between steps, so that the narrower windows' cheaper products and
+        builds outweigh their extra iterations; edge_window elsewhere, and nowhere when it is 0."""
+        if self.edge_window == 0:
+            return 0
+        if area >= self.edge_large_area and modulus_range <= self.edge_large_modulus_max:
+            return self.edge_window_large
+        return self.edge_window
 
     def widest_step_area(self, n):
         """The largest A/A0 step_area gives an n x n grid at any modulus range (the contact
