@@ -66,8 +66,7 @@ class ContactSetStep(SubsetStep):
     def __init__(self, op, kappa, PETSc, prefix, settings, work=None):
         super().__init__(op, kappa, PETSc, prefix + "contact_", settings, work)
         self.free = np.zeros(self.shape, dtype=bool)   # the free set F
-        self.edge = None        # the edge term of the current set (set_active): one of _edges, or None
-        self._edges = {}        # EdgeCorrection by half width, made on first use (one FFT pair each)
+        self.edge = None        # the edge term (EdgeCorrection) of the current set's half width, or None
         self.advance = None     # called (x, s) after each Newton update: NewtonState.advance (snes.py)
         self._kernel = None     # c(x) on every rank, for the map of carried directions (made on first use)
 
@@ -133,7 +132,6 @@ class ContactSetStep(SubsetStep):
     def release(self):
         super().release()
         self.edge = self.advance = self._kernel = None
-        self._edges = {}
 
     # ------------------------------------------------------------------ helpers
     def mean_C(self, a):
@@ -148,9 +146,11 @@ class ContactSetStep(SubsetStep):
         self.select(np.flatnonzero(act.ravel()), n_active)
         st = self.settings
         w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2)
-        if w > 0 and w not in self._edges:
-            self._edges[w] = EdgeCorrection(self.op, w, st.edge_drop, st.store_headroom)
-        self.edge = self._edges.get(w)
+        if w == 0:
+            self.edge = None
+        elif self.edge is None or self.edge.w != w:
+            # one term at a time (its arrays scale with the set); a new width costs one pair
+            self.edge = EdgeCorrection(self.op, w, st.edge_drop, st.store_headroom)
         if self.edge is not None:
             self.edge.build(act, self.idx)
 
