@@ -80,7 +80,7 @@ def test_no_carry_outside_the_gates(gate):
     carry_modulus_min above its range: the contact-set steps neither keep nor start from directions,
     the solve of carry_directions 0 to the FFT pair; inside both gates (0.3, 50) they carry."""
     gated, act_gated = paper_contact_solve(gate)
-    off, act_off = paper_contact_solve({"vc_carry_directions": "0"})
+    off, act_off = paper_contact_solve(dict(gate, vc_carry_directions="0"))    # the gate's other options
     on, _ = paper_contact_solve(CARRY_OPEN)
     assert gated.converged and off.converged and max(gated.residual, off.residual) <= 1e-8
     assert gated.diagnostics["step_modes"][-1][1] == "contact" and 0.05 < gated.area <= 0.3
