@@ -79,10 +79,10 @@ class ContactSetStep(SubsetStep):
         return Restricted(self, self.op.c, self._remove_mean)
 
     def preconditioner(self):
-        local = self._edge_term if self.settings.edge_window > 0 else None
-        return Restricted(self, self.op.m, self._remove_mean, local=local)
+        return Restricted(self, self.op.m, self._remove_mean, local=self._edge_term)
 
     def _edge_term(self, x, y):
+        """y += the current set's edge term of x (set_active picks its width); nothing without one."""
         if self.edge is not None:
             self.edge.add_to(x, y)
 
