@@ -59,6 +59,7 @@ def record_steps(fft, L, h, modulus, velocity, sigma0, mode="free"):
     cls = FreeSetStep if mode == "free" else ContactSetStep
     steps = []
     solve = cls.solve
+    own = "solve" in vars(cls)          # else inherited: put nothing back on the class afterwards
 
     def recording(step):
         before = step.iterations
@@ -72,7 +73,10 @@ def record_steps(fft, L, h, modulus, velocity, sigma0, mode="free"):
     try:
         result = solve_contact(fft, L, h, modulus, velocity, sigma0, tolerance=1e-8, store=())
     finally:
-        cls.solve = solve
+        if own:
+            cls.solve = solve
+        else:
+            del cls.solve
     return result, steps
 
 

@@ -119,6 +119,28 @@ def test_petsc_options_and_nonconvergence():
     assert r.converged
 
 
+def test_eisenstat_walker_forcing_reaches_the_inner_solves(monkeypatch):
+    """-snes_ksp_ew: every Newton step's inner Krylov solve runs at the rtol PETSc's Eisenstat-Walker
+    forcing put on the outer (preonly) KSP, the first at rtol0, not at the inner KSP's own default."""
+    from vecontact.solver import subset
+    seen = []
+    solve = subset.SubsetStep.solve
+
+    def recorded(self):
+        solve(self)
+        seen.append((self.ksp.getTolerances()[0], self._outer.getTolerances()[0]))
+
+    monkeypatch.setattr(subset.SubsetStep, "solve", recorded)
+    fft = _fft(64)
+    h = _random_surface(fft, 1e-4, q1fac=6)
+    r = solve_contact(fft, 1e-4, h, Elastic(3e6), 0.0, 2e3, coarse=False,
+                      petsc_options="-snes_ksp_ew -snes_ksp_ew_rtol0 0.25")
+    assert r.converged, r.summary()
+    assert len(seen) >= 3 and seen[0][0] == 0.25
+    assert all(inner == outer for inner, outer in seen)      # the same float, passed on
+    assert len({inner for inner, _ in seen}) >= 2             # the forcing moves from step to step
+
+
 def test_bad_step_mode_is_refused():
     fft = _fft(32)
     h = _random_surface(fft, 1e-4, q1fac=4)

@@ -22,9 +22,11 @@ exact step's solve also ends as soon as its update meets the convergence test (m
 changing step solves with a float32 Krylov basis (single.py, SolverSettings.changing_precision), an
 exact one too near the solution (single_exact_reduction_max);
 ``-snes_ksp_ew`` or any ``-ksp_``/``-contact_ksp_`` rtol, atol or max_it in the options hand them to
-PETSc instead.  Convergence is decided by our own scale-free test (operator.py), installed with
-SNESSetConvergenceTest.  ``-snes_type vinewtonrsls`` selects PETSc's reduced-space VI method (vi.py).
-Every constant: settings.py; the measurements behind them: benchmarks/RESULTS.md.
+PETSc instead (with ``-snes_ksp_ew`` each step's inner solve takes the rtol PETSc's Eisenstat-Walker
+forcing sets on the outer KSP; it diverged at fast sliding, benchmarks/RESULTS.md).  Convergence is
+decided by our own scale-free test (operator.py), installed with SNESSetConvergenceTest.
+``-snes_type vinewtonrsls`` selects PETSc's reduced-space VI method (vi.py).  Every constant:
+settings.py; the measurements behind them: benchmarks/RESULTS.md.
 """
 from __future__ import annotations
 
@@ -265,6 +267,8 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))
         steps["contact"].advance = state.advance      # its residual without an FFT pair
+        for step in steps.values():
+            step.forcing = "snes_ksp_ew" in options     # EW sets the outer KSP's rtol; the steps pass it on
         stop = None
         if policy.own and settings.measure_stop == "on":
             stop = MeasureStop(state, tol, PETSc)

@@ -307,6 +307,8 @@ class SubsetStep:
         self.stalls = 0                 # float32-basis cycles restarted on a stalled estimate (single.py)
         self.cycle = 1                  # Krylov iterations per iteration of self.ksp (nested: the inner's)
         self.solves = 0
+        self.forcing = False            # -snes_ksp_ew: each solve takes the rtol PETSc's Eisenstat-Walker
+        self._outer = None              # forcing gave the outer KSP (activate's), which preonly ignores
         self._A = self._b = self._y = self._A_ctx = None
         self.mixed = False              # the next PETSc solve's operator with mixed pairs (set_tolerances)
         self._mixed_grid = None         # the operator's Mixed (operator_mixed)
@@ -326,6 +328,7 @@ class SubsetStep:
         """Solve the next Newton steps with the outer ``ksp`` as preonly + this PC."""
         self._carry_from = None         # the last solve of this step type was not the last Newton step's
         ksp.setType("preonly")
+        self._outer = ksp
         ksp.getPC().setType("python")     # a -pc_type under the shared prefix is the inner KSP's, not this one's
         ksp.getPC().setPythonContext(self)
 
@@ -419,6 +422,8 @@ class SubsetStep:
 
     def solve(self):
         """Inner solve of A y = b (the vectors ``_b``, ``_y``) from y = 0."""
+        if self.forcing:
+            self.ksp.setTolerances(rtol=self._outer.getTolerances()[0])
         if self.single:
             self._solve_single()
         else:
@@ -577,7 +582,7 @@ class SubsetStep:
         for obj in (self._A, self._b, self._y, self.ksp):
             if obj is not None:
                 obj.destroy()
-        self._A = self._b = self._y = self.ksp = self._A_ctx = self._mixed_grid = None
+        self._A = self._b = self._y = self.ksp = self._A_ctx = self._mixed_grid = self._outer = None
         opts = self.PETSc.Options()
         for k in self._own_keys:
             try:
