@@ -13,14 +13,14 @@ CLI_OURS = {"--quiet", "--no-plot", "-o", "--output", "-h", "--help", "--version
 
 def test_forms_agree():
     """A mapping, a string and command-line tokens give the same options."""
-    text = "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor -snes_rtol -1e-3 -vc_restart_max 60"
-    want = {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None, "snes_rtol": "-1e-3",
+    text = "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor -ksp_divtol -1e-3 -vc_restart_max 60"
+    want = {"snes_type": "vinewtonrsls", "ksp_rtol": "0.001", "snes_monitor": None, "ksp_divtol": "-1e-3",
             "vc_restart_max": "60"}
     assert parse(text) == want
     assert parse(text.split()) == want
-    assert parse(["-snes_type vinewtonrsls", "-ksp_rtol 0.001 -snes_monitor", "-snes_rtol", "-1e-3",
+    assert parse(["-snes_type vinewtonrsls", "-ksp_rtol 0.001 -snes_monitor", "-ksp_divtol", "-1e-3",
                   "-vc_restart_max 60"]) == want
-    assert parse({"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3, "snes_monitor": None, "snes_rtol": "-1e-3",
+    assert parse({"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3, "snes_monitor": None, "ksp_divtol": "-1e-3",
                   "vc_restart_max": 60}) == want
     _, tokens = split_argv(["run", "job.yaml"] + text.split(), CLI_OURS)
     assert parse(tokens) == want
@@ -70,6 +70,9 @@ def test_mapping_values():
     ({"vc_recycle_cost": 4}, "lost in wall time"),
     ("-vc_smooth_omega 0.7", "Chebyshev steps now, -vc_smooth_ratio"),
     ("-vc_contact_step_range_min 5e4", "replaced by -vc_contact_step_modulus_max"),
+    ("-snes_rtol 1e-2", "-snes_rtol: no effect: .* set numerics.tolerance"),
+    ({"snes_atol": 1e3}, "-snes_atol: no effect"),
+    ("-snes_stol 1e-10", "-snes_stol: no effect"),
 ])
 def test_errors_name_the_key(value, problem):
     """Bad options: an OptionError that is an InputError (one line, the caller's key) and a ValueError."""
@@ -80,11 +83,11 @@ def test_errors_name_the_key(value, problem):
 
 
 def test_split_argv():
-    argv = ["run", "job.yaml", "-snes_rtol", "-1e-3", "--quiet", "-o", "out.h5", "-snes_monitor",
+    argv = ["run", "job.yaml", "-ksp_divtol", "-1e-3", "--quiet", "-o", "out.h5", "-snes_monitor",
             "-ksp_type", "gmres", "--no-plot"]
     known, tokens = split_argv(argv, CLI_OURS)
     assert known == ["run", "job.yaml", "--quiet", "-o", "out.h5", "--no-plot"]
-    assert tokens == ["-snes_rtol", "-1e-3", "-snes_monitor", "-ksp_type", "gmres"]
+    assert tokens == ["-ksp_divtol", "-1e-3", "-snes_monitor", "-ksp_type", "gmres"]
 
 
 def test_solver_items_split_ours_from_petsc():

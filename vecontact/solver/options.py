@@ -7,13 +7,14 @@ Rules, the same everywhere:
 * Names: letters, digits and underscores, not starting with a digit (``-ksp_rtol=1e-3`` and
   ``--ksp_rtol`` are errors).
 * In a string or list, a token that starts with '-' is a name unless it is a number
-  (``[+-]digits[.digits][e[+-]digits]``): ``-snes_rtol -1e-3`` sets snes_rtol to "-1e-3".  The token
+  (``[+-]digits[.digits][e[+-]digits]``): ``-ksp_divtol -1e-3`` sets ksp_divtol to "-1e-3".  The token
   after a name is its value unless it is itself a name; a name without a value is a flag.
 * Values are strings; a flag is None (PETSc reads it as true).  In a mapping, None or "" is a flag,
   True/False become "true"/"false", numbers str(value); lists and mappings are errors.
 * A repeated name: the last value wins (as in PETSc).
 * ``-vc_<field>`` sets a SolverSettings field (settings.py) and is checked here; a removed or renamed
-  option of an old job is an error naming its replacement (RETIRED).
+  option of an old job is an error naming its replacement (RETIRED), and so is a PETSc option the
+  solver overrides, which would do nothing (NO_EFFECT: -snes_rtol, -snes_atol, -snes_stol).
 
 Errors are OptionError: an InputError (one line naming the caller's key) and a ValueError.
 """
@@ -24,7 +25,7 @@ import re
 from vecontact.errors import InputError
 from vecontact.solver.settings import PREFIX, SolverSettings
 
-__all__ = ["parse", "split_argv", "solver_items", "OptionError", "RETIRED"]
+__all__ = ["parse", "split_argv", "solver_items", "OptionError", "RETIRED", "NO_EFFECT"]
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?\Z")
@@ -51,6 +52,12 @@ RETIRED = {
     (f"{PREFIX}smooth_omega", None): f"removed with the damped-Jacobi smoothing: its sweeps take Chebyshev "
                                      f"steps now, -{PREFIX}smooth_ratio (benchmarks/RESULTS.md)",
 }
+
+
+_OWN_TEST = ("no effect: the solver's own scale-free test decides convergence (docs/solver.md, "
+             "\"Convergence\"); set numerics.tolerance, or solve_contact(..., tolerance=...)")
+# PETSc options the solver overrides, which would silently do nothing -> why, one line each
+NO_EFFECT = {"snes_rtol": _OWN_TEST, "snes_atol": _OWN_TEST, "snes_stol": _OWN_TEST}
 
 
 class OptionError(InputError, ValueError):
@@ -140,6 +147,9 @@ def _check(options, key):
     for (name, val), why in RETIRED.items():
         if name in options and (val is None or options[name] == val):
             raise OptionError(key, f"-{name}{'' if val is None else ' ' + val}: {why}")
+    for name, why in NO_EFFECT.items():
+        if name in options:
+            raise OptionError(key, f"-{name}: {why}")
     try:
         SolverSettings().with_options(options)
     except ValueError as exc:
