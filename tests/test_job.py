@@ -155,6 +155,26 @@ def test_seeds_per_q1():
     assert jobs.physics_hash(flat) == jobs.physics_hash(job)   # resuming with more seeds is allowed
 
 
+@pytest.mark.parametrize("petsc, problem", [
+    ({"snes_divergence_tolerance": "1e-10"}, "Divergence tolerance 1e-10 must be greater than 1"),
+    ({"contact_ksp_type": "no_such_krylov"}, "Unable to find requested KSP type no_such_krylov"),
+    ({"ksp_rtol": "abc"}, "Input string abc has no numeric value"),
+])
+def test_cli_value_petsc_refuses_exit_2_one_line_nothing_written(tmp_path, petsc, problem):
+    """A PETSc option whose value PETSc refuses stops the run before any case or file, in one line."""
+    job = _bad("numerics", {"enabled": True, "petsc": petsc})
+    job["output"] = str(tmp_path / "out.h5")
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path), "--no-plot"], capture_output=True,
+                          text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vecontact: error: numerics.petsc: PETSc refuses it: ")
+    assert problem in lines[0] and "Traceback" not in proc.stderr + proc.stdout
+    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+
+
 def test_petsc_options_forms():
     a = jobs.resolve(_bad("numerics.petsc", {"snes_type": "vinewtonrsls", "-ksp_rtol": 1e-3}), ROOT)
     b = jobs.resolve(_bad("numerics.petsc", "-snes_type vinewtonrsls -ksp_rtol 0.001 -snes_monitor"), ROOT)

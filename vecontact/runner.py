@@ -89,6 +89,10 @@ def run(job, comm=MPI.COMM_WORLD, quiet=False, petsc_args=(), only_q1=None):
     psds = spectra(job, comm)
     cases = sweep.expand(job, psds)
     rows, groups = sweep.theory(job, psds, cases)
+    if job.numerics.enabled:     # a value PETSc refuses: an InputError on every rank, nothing written
+        from vecontact.farm.run import petsc_options
+        from vecontact.solver.snes import check_options
+        check_options(petsc_options(job, petsc_args))
     writer = open_results(job, comm)
     if writer is not None:
         for name, (datasets, attrs) in groups.items():

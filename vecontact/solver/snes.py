@@ -45,7 +45,7 @@ from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PET
 from vecontact.solver.subset import Workspace
 from vecontact.solver.vi import ViNewton
 
-__all__ = ["ncp_solve", "petsc", "hold_comm", "POLICY_OFF"]
+__all__ = ["ncp_solve", "petsc", "hold_comm", "check_options", "POLICY_OFF"]
 
 _PETSC = None
 _ANCHORS = {}
@@ -192,6 +192,33 @@ class _Convergence:
         if it >= snes.getTolerances()[3]:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return PETSc.SNES.ConvergedReason.ITERATING
+
+
+def check_options(options, key="numerics.petsc"):
+    """Let PETSc read the user's ``options`` (a parsed dict, options.py) on a throwaway SNES and on an
+    inner KSP under the contact-set steps' prefix, on this rank alone, so that a value PETSc refuses
+    (a divergence tolerance below 1, an unknown KSP type, a word for a number) is an OptionError before
+    any case starts, instead of a PETSc traceback in the first one.  Nothing is left in the options
+    database."""
+    from vecontact.solver.options import OptionError, solver_items
+    PETSc = petsc()
+    prefix = "vecontact_check_"
+    keys = _apply_options(PETSc, prefix, {}, solver_items(options)[0])
+    objs = []
+    try:
+        for obj, own in ((PETSc.SNES(), ""), (PETSc.KSP(), "contact_")):
+            objs.append(obj.create(comm=PETSc.COMM_SELF))
+            obj.setOptionsPrefix(prefix + own)
+            obj.setFromOptions()
+    except PETSc.Error as exc:
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        raise OptionError(key, f"PETSc refuses it: {lines[-1].removeprefix('[0]').strip()}") from None
+    finally:
+        for obj in objs:
+            obj.destroy()
+        opts = PETSc.Options()
+        for k in keys:
+            opts.delValue(k)
 
 
 def _apply_global_options(PETSc, user):
