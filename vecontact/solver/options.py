@@ -57,7 +57,7 @@ RETIRED = {
 _OWN_TEST = ("no effect: the solver's own scale-free test decides convergence (docs/solver.md, "
              "\"Convergence\"); set numerics.tolerance, or solve_contact(..., tolerance=...)")
 # PETSc options the solver overrides, which would silently do nothing -> why, one line each
-NO_EFFECT = {"snes_rtol": _OWN_TEST, "snes_atol": _OWN_TEST, "snes_stol": _OWN_TEST}
+NO_EFFECT = dict.fromkeys(("snes_rtol", "snes_atol", "snes_stol"), _OWN_TEST)
 
 
 class OptionError(InputError, ValueError):
