@@ -109,6 +109,23 @@ def test_viscoelastic_mu_consistency_and_warm():
     assert abs(r3.mu - r2.mu) < 1e-6 * r2.mu
 
 
+def test_displacement_is_transformed_back_only_when_asked_for():
+    """mu needs only the displacement's spectrum: without "displacement" in ``store`` the solve skips
+    its backward transform (half an FFT pair) and nothing else changes, bit for bit."""
+    N, L = 64, 1e-4
+    fft = _fft(N)
+    h = _random_surface(fft, L, q1fac=8)
+    mod = SLS(3e6, 3e8, 1e-6, 0.5)
+    full = solve_contact(fft, L, h, mod, 20.0, 3e4, store=("pressure", "gap", "displacement"))
+    lean = solve_contact(fft, L, h, mod, 20.0, 3e4, store=("pressure",))
+    assert full.converged and lean.converged
+    assert lean.displacement is None and full.displacement is not None
+    assert full.fft_pairs - lean.fft_pairs == 0.5
+    for key in ("area", "mu", "mu_geometric", "mean_gap", "residual"):
+        assert getattr(lean, key) == getattr(full, key), key
+    assert np.array_equal(lean.pressure, full.pressure)
+
+
 def test_petsc_options_and_nonconvergence():
     N, L = 64, 1e-4
     fft = _fft(N)

@@ -80,7 +80,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         grids hold all the roughness of null-band surfaces.  Ignored when N is too small.
     max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it) or CG
         iterations (pk, default settings.pk_max_it)
-    store : which local fields to return ("pressure", "gap", "displacement")
+    store : which local fields to return ("pressure", "gap", "displacement"); without "displacement" its
+        backward transform is skipped (mu needs only its spectrum: half an FFT pair less)
     monitor : optional callable(level_N, iteration, residual) for progress output
     settings : SolverSettings (settings.py; default: its defaults), every tuning constant of the solve
 
@@ -176,7 +177,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     # returned fields (SI): zero pressure off contact, zero gap in contact
     p_out = np.where(act, phat * op.sigma0, 0.0)
     g_out = np.where(act, 0.0, ghat * op.ell)
-    scal, w = postprocess(op, p_out, g_out)
+    scal, w = postprocess(op, p_out, g_out, displacement="displacement" in store)
     fft.release_arrays()            # the plans would keep the last fields of this solve alive
     for n, (f, t0c) in coarse_start.items():
         by_level[n] = (f.transforms - t0c) / 2.0

@@ -67,8 +67,9 @@ class ContactResult:
                 f"t={self.seconds:.2f}s ({self.reason})")
 
 
-def postprocess(op, p_out, g_out):
-    """Scalars of the SI fields p_out (Pa), g_out (m) on op's grid. Returns (dict, w) with w (m)."""
+def postprocess(op, p_out, g_out, displacement=True):
+    """Scalars of the SI fields p_out (Pa), g_out (m) on op's grid. Returns (dict, w) with w (m) the
+    displacement, or None when ``displacement`` is False (mu needs only its spectrum: half a pair less)."""
     fft = op.fft
     n2 = float(op.N) ** 2
     npos = np.count_nonzero(p_out > 0)
@@ -84,7 +85,7 @@ def postprocess(op, p_out, g_out):
     Wq = (Gq + op.h_fourier) / n2
     if fft.col_start == 0:
         Wq[0, 0] = 0.0
-    w = fft.backward(Wq * n2)
+    w = fft.backward(Wq * n2) if displacement else None
     # dissipation: sum over full spectrum of q_x Im(M_q) |w_q|^2 / sigma0, with Im(M) / sigma0 = Im(m) / ell
     dens = (op.qx * op.m.imag) * (Wq.real ** 2 + Wq.imag ** 2)
     loc = float(np.sum(dens.sum(axis=0) * fft.half_weights()[0]))
