@@ -156,7 +156,7 @@ def test_seeds_per_q1():
 
 
 @pytest.mark.parametrize("petsc, problem", [
-    ({"snes_divergence_tolerance": "1e-10"}, "Divergence tolerance 1e-10 must be greater than 1"),
+    ({"snes_linesearch_type": "no_such_search"}, "Unable to find requested Line Search type no_such_search"),
     ({"contact_ksp_type": "no_such_krylov"}, "Unable to find requested KSP type no_such_krylov"),
     ({"ksp_rtol": "abc"}, "Input string abc has no numeric value"),
 ])

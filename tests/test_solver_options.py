@@ -73,6 +73,8 @@ def test_mapping_values():
     ("-snes_rtol 1e-2", "-snes_rtol: no effect: .* set numerics.tolerance"),
     ({"snes_atol": 1e3}, "-snes_atol: no effect"),
     ("-snes_stol 1e-10", "-snes_stol: no effect"),
+    ("-snes_divergence_tolerance 1e4", "-snes_divergence_tolerance: no effect: .* -snes_max_it Newton steps"),
+    ({"snes_max_funcs": 100}, r"-snes_max_funcs: no effect: .*\(numerics.max_iterations\)"),
 ])
 def test_errors_name_the_key(value, problem):
     """Bad options: an OptionError that is an InputError (one line, the caller's key) and a ValueError."""

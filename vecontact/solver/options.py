@@ -14,7 +14,8 @@ Rules, the same everywhere:
 * A repeated name: the last value wins (as in PETSc).
 * ``-vc_<field>`` sets a SolverSettings field (settings.py) and is checked here; a removed or renamed
   option of an old job is an error naming its replacement (RETIRED), and so is a PETSc option the
-  solver overrides, which would do nothing (NO_EFFECT: -snes_rtol, -snes_atol, -snes_stol).
+  solver overrides, which would do nothing (NO_EFFECT: -snes_rtol, -snes_atol, -snes_stol,
+  -snes_divergence_tolerance, -snes_max_funcs).
 
 Errors are OptionError: an InputError (one line naming the caller's key) and a ValueError.
 """
@@ -56,8 +57,12 @@ RETIRED = {
 
 _OWN_TEST = ("no effect: the solver's own scale-free test decides convergence (docs/solver.md, "
              "\"Convergence\"); set numerics.tolerance, or solve_contact(..., tolerance=...)")
-# PETSc options the solver overrides, which would silently do nothing -> why, one line each
-NO_EFFECT = dict.fromkeys(("snes_rtol", "snes_atol", "snes_stol"), _OWN_TEST)
+_STEPS = ("no effect: the solver's own test ends a solve (docs/solver.md, \"Convergence\"): converged, or "
+          "recorded as failed with its residual after -snes_max_it Newton steps (numerics.max_iterations)")
+# PETSc options the solver overrides, which would silently do nothing -> why, one line each (PETSc's
+# default convergence test reads them, and the solver's replaces it)
+NO_EFFECT = dict(dict.fromkeys(("snes_rtol", "snes_atol", "snes_stol"), _OWN_TEST),
+                 snes_divergence_tolerance=_STEPS, snes_max_funcs=_STEPS)
 
 
 class OptionError(InputError, ValueError):

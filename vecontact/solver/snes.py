@@ -197,7 +197,7 @@ class _Convergence:
 def check_options(options, key="numerics.petsc"):
     """Let PETSc read the user's ``options`` (a parsed dict, options.py) on a throwaway SNES and on an
     inner KSP under the contact-set steps' prefix, on this rank alone, so that a value PETSc refuses
-    (a divergence tolerance below 1, an unknown KSP type, a word for a number) is an OptionError before
+    (a negative restart, an unknown KSP type, a word for a number) is an OptionError before
     any case starts, instead of a PETSc traceback in the first one.  Nothing is left in the options
     database."""
     from vecontact.solver.options import OptionError, solver_items
