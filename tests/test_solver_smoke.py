@@ -120,7 +120,8 @@ def test_displacement_is_transformed_back_only_when_asked_for():
     lean = solve_contact(fft, L, h, mod, 20.0, 3e4, store=("pressure",))
     assert full.converged and lean.converged
     assert lean.displacement is None and full.displacement is not None
-    assert full.fft_pairs - lean.fft_pairs == 0.5
+    # the pairs are sums of level counts times weights: equal up to the rounding of that sum
+    assert full.fft_pairs - lean.fft_pairs == pytest.approx(0.5, abs=1e-12 * full.fft_pairs)
     for key in ("area", "mu", "mu_geometric", "mean_gap", "residual"):
         assert getattr(lean, key) == getattr(full, key), key
     assert np.array_equal(lean.pressure, full.pressure)
