@@ -39,6 +39,21 @@ def _bad(path, value):
     return job
 
 
+def _refused(tmp_path, job, *args, timeout=120):
+    """Run ``job`` (with its output in tmp_path) through the CLI, which must refuse it: exit status 2,
+    one line on stderr, no traceback, nothing written but the job file.  Returns that line."""
+    job["output"] = str(tmp_path / "out.h5")
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(job))
+    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path)] + list(args), capture_output=True,
+                          text=True, cwd=tmp_path, timeout=timeout)
+    assert proc.returncode == 2, proc.stdout + proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr + proc.stdout, proc.stderr
+    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+    return lines[0]
+
+
 # (change, key the message must name)
 BAD = [
     (("surface.q1", [5.0e5]), "surface.q1"),                     # q1 <= qr
@@ -162,17 +177,8 @@ def test_seeds_per_q1():
 ])
 def test_cli_value_petsc_refuses_exit_2_one_line_nothing_written(tmp_path, petsc, problem):
     """A PETSc option whose value PETSc refuses stops the run before any case or file, in one line."""
-    job = _bad("numerics", {"enabled": True, "petsc": petsc})
-    job["output"] = str(tmp_path / "out.h5")
-    path = tmp_path / "job.yaml"
-    path.write_text(yaml.safe_dump(job))
-    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path), "--no-plot"], capture_output=True,
-                          text=True, cwd=tmp_path, timeout=300)
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("vecontact: error: numerics.petsc: PETSc refuses it: ")
-    assert problem in lines[0] and "Traceback" not in proc.stderr + proc.stdout
-    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+    line = _refused(tmp_path, _bad("numerics", {"enabled": True, "petsc": petsc}), "--no-plot", timeout=300)
+    assert line.startswith("vecontact: error: numerics.petsc: PETSc refuses it: ") and problem in line
 
 
 def test_petsc_options_forms():
@@ -184,17 +190,7 @@ def test_petsc_options_forms():
 
 @pytest.mark.parametrize("change,key", BAD[:14], ids=[str(c[0]) for c, _ in BAD[:14]])
 def test_cli_bad_job_exit_2_one_line_nothing_written(tmp_path, change, key):
-    job = _bad(*change)
-    job["output"] = str(tmp_path / "out.h5")
-    path = tmp_path / "job.yaml"
-    path.write_text(yaml.safe_dump(job))
-    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path)], capture_output=True,
-                          text=True, cwd=tmp_path, timeout=120)
-    assert proc.returncode == 2
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"vecontact: error: {key}"), proc.stderr
-    assert "Traceback" not in proc.stderr + proc.stdout
-    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+    assert _refused(tmp_path, _bad(*change)).startswith(f"vecontact: error: {key}")
 
 
 def test_cli_missing_and_malformed_files(tmp_path):
@@ -243,13 +239,5 @@ def test_paper_pressures_span_the_area_range():
 def test_cli_bad_petsc_option_on_command_line(tmp_path):
     """A solver option of vecontact's own passed on the command line is checked before any solve."""
     job = yaml.safe_load(open(os.path.join(ROOT, "jobs", "demo.yaml")))
-    job["output"] = str(tmp_path / "out.h5")
-    path = tmp_path / "job.yaml"
-    path.write_text(yaml.safe_dump(job))
-    proc = subprocess.run([sys.executable, "-m", "vecontact", "run", str(path), "--no-plot",
-                           "-contact_step", "sideways"], capture_output=True, text=True, cwd=tmp_path,
-                          timeout=120)
-    assert proc.returncode == 2, proc.stdout + proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("vecontact: error: numerics.petsc"), proc.stderr
-    assert sorted(os.listdir(tmp_path)) == ["job.yaml"]
+    line = _refused(tmp_path, job, "--no-plot", "-contact_step", "sideways")
+    assert line.startswith("vecontact: error: numerics.petsc")

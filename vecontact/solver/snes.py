@@ -216,9 +216,7 @@ def check_options(options, key="numerics.petsc"):
     finally:
         for obj in objs:
             obj.destroy()
-        opts = PETSc.Options()
-        for k in keys:
-            opts.delValue(k)
+        _remove_options(PETSc, keys)
 
 
 def _apply_global_options(PETSc, user):
@@ -241,6 +239,13 @@ def _apply_options(PETSc, prefix, defaults, user):
     for k, v in items.items():
         opts[prefix + k] = v
     return [prefix + k for k in items]
+
+
+def _remove_options(PETSc, keys):
+    """Take the keys _apply_options set out of the options database again."""
+    opts = PETSc.Options()
+    for k in keys:
+        opts.delValue(k)
 
 
 _COUNTER = [0]
@@ -348,6 +353,4 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
         form = conv = state = snes = X = Fv = J = None
         gc.collect()
         PETSc.garbage_cleanup(comm)
-        opts = PETSc.Options()
-        for k in keys:
-            opts.delValue(k)
+        _remove_options(PETSc, keys)
