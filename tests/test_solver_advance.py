@@ -99,3 +99,30 @@ def test_measures_are_their_definitions():
         assert np.array_equal(g, g0) and np.array_equal(p, p0)
     # no penetration: the measure is 0, not the largest gap's negative
     assert op.measures(np.abs(g) + 0.5, p)[1] == 0.0
+
+
+def test_smooth_step_replaces_the_step_by_the_smoothed_iterate():
+    """NewtonState.smooth_step (the free-set steps' smoothing, snes.py): the step y from x becomes
+    x - S(max(x - y, 0)), S the sweeps of warmstart.smooth_gap computed on their own arrays (the same
+    operations in the same order, so the same bits), at one FFT pair a sweep; the cached iterate is let
+    go of, so the next ensure() computes the pressure of the new one."""
+    from vecontact.solver.warmstart import smooth_gap
+    op = _operator()
+    fft = op.fft
+    rng = np.random.default_rng(5)
+    x = np.abs(rng.standard_normal(fft.local_real_shape)) * (op.hhat < np.quantile(op.hhat, 0.8))
+    y = 0.1 * rng.standard_normal(fft.local_real_shape)
+    state = NewtonState(op)
+    state.ensure(x)
+    expected = x - smooth_gap(op, np.maximum(x - y, 0.0), 3, 6.0)
+    y0 = y.copy()
+    t0 = fft.transforms
+    state.smooth_step(x, y, 3, 6.0)
+    assert (fft.transforms - t0) / 2 == 3
+    assert np.array_equal(y, expected)
+    assert np.max(np.abs(y - y0)) > 1e-3 * np.max(np.abs(y0))           # the sweeps did move the iterate
+    assert not state.valid
+    t0 = fft.transforms
+    state.ensure(x - y)
+    assert (fft.transforms - t0) / 2 == 1
+    assert np.max(np.abs(state.p - op.pressure(x - y))) <= 1e-12 * np.max(np.abs(state.p))

@@ -131,13 +131,15 @@ _RANGE = {"vc_lin_maxit_changing": 3, "vc_cycle_after_cap": 1000, "vc_cycle_afte
           "vc_cycle_range_max": 0}
 
 
-@pytest.mark.parametrize("step, cycle, gate", [("contact", 0, {}), ("free", 0, {}), ("free", 4, _CAP),
-                                               ("free", 4, _RANGE)], ids=["contact", "free", "cycles", "range"])
+@pytest.mark.parametrize("step, cycle, gate", [("contact", 0, {}), ("free", 0, {}), ("free", 0, {"vc_step_sweeps": 0}),
+                                               ("free", 4, _CAP), ("free", 4, _RANGE)],
+                         ids=["contact", "free", "free-unsmoothed", "cycles", "range"])
 @pytest.mark.parametrize("v,sigma0", [(1.0, 2e4), (30.0, 5e4)])
 def test_newton_step_modes_vs_dense(step, cycle, gate, v, sigma0):
     """Both ways of solving the Newton step (on the contact set / on the free set, chosen by area in
     ``auto``; the free set by plain GMRES, or by FGMRES over GMRES(4) cycles once a step used its cap)
-    forced for a whole solve: the same exact solution."""
+    forced for a whole solve: the same exact solution; with the free set's smoothing after every changing
+    step (SolverSettings.step_sweeps) or without it."""
     N, name = 32, "hn"
     h = surface(N)
     ref = reference(N, name, v, sigma0)
@@ -145,6 +147,9 @@ def test_newton_step_modes_vs_dense(step, cycle, gate, v, sigma0):
     res, f = solve_full(h, L_PAPER, modulus(name), v, sigma0, comm=MPI.COMM_SELF, coarse=False,
                         petsc_options=opts)
     compare(res, f, ref, h, sigma0, name, f"snes step={step} v={v}")
+    changing = sum(1 for c in res.diagnostics["active_set_changes"] if c != 0)
+    smoothed = changing if step == "free" and gate.get("vc_step_sweeps", 1) else 0
+    assert changing > 0 and res.diagnostics["smoothed_steps"] == smoothed
     if cycle:   # the steps after the first ran in whole cycles of 4
         its = np.diff(res.diagnostics["linear_history"])
         assert its[0] == 3 and len(its) > 1 and np.all(its[1:] % cycle == 0), its

@@ -62,6 +62,24 @@ def test_loose_while_the_set_changes_then_exact():
     assert p.changes == [-1, 3035, 340, 0, 0]
 
 
+@pytest.mark.parametrize("own", [True, False])
+def test_smoothing_after_changing_free_set_steps_only(own):
+    """The iterate a free-set step makes while the set changes is smoothed (step_sweeps sweeps); not
+    after a contact-set step nor after an exact one; whoever sets the tolerances (``own``)."""
+    assert S.step_sweeps > 0
+    p = StepPolicy(S, 1e-8, own=own)
+    sweeps = []
+    for res, change, mode in [(1.0, -1, "free"), (0.1, 30, "free"), (0.01, 3, "contact"), (1e-3, 0, "free"),
+                              (1e-4, 2, "free"), (1e-5, 0, "contact")]:
+        p.record_residual(res)
+        p.step(change, mode)
+        sweeps.append(p.sweeps)
+    assert sweeps == [S.step_sweeps, S.step_sweeps, 0, 0, S.step_sweeps, 0]
+    off = StepPolicy(SolverSettings(step_sweeps=0), 1e-8, own=own)
+    off.step(-1, "free")
+    assert off.sweeps == 0
+
+
 def _steps_with_iterations(policy, steps):
     """Like _run, with the Krylov iterations each step took reported before the next one."""
     out = []

@@ -67,7 +67,7 @@ RESULT_DIAGNOSTICS = (REASON, "method", "measures", "fft_pairs_by_level")
 SOLVER_DIAGNOSTICS = (("levels", ()), ("history", ()), ("active_set_changes", ()), ("linear_history", ()),
                       ("step_modes", ()), ("measure_checks", ()), ("single_iterations", None),
                       ("float32_pairs", None), ("mixed_pairs", None), ("carried_directions", None), ("stalls", None),
-                      ("kappa", None), ("ell", None))
+                      ("smoothed_steps", None), ("kappa", None), ("ell", None))
 #: diagnostics the farm measures around the solve
 FARM_DIAGNOSTICS = ("raw_pair_seconds",)
 DIAGNOSTICS = RESULT_DIAGNOSTICS + tuple(k for k, _ in SOLVER_DIAGNOSTICS) + FARM_DIAGNOSTICS

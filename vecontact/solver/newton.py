@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
+from vecontact.solver.warmstart import smooth_gap
+
 __all__ = ["NewtonState"]
 
 
@@ -17,7 +19,8 @@ class NewtonState:
     ``ensure(g)`` makes (g, p) the pressure of the iterate g (one FFT pair when g is new);
     ``update_active_set()`` moves to the active set of the current iterate and counts its changes;
     ``advance(x, s)`` moves to the Newton iterate g - x of a step whose pressure increment m x = s is
-    known (contact-set steps), so that its residual costs no FFT pair.
+    known (contact-set steps), so that its residual costs no FFT pair; ``smooth_step(g0, x, ...)``
+    smooths the iterate a step makes (free-set steps while the set changes, policy.py).
     """
 
     def __init__(self, op):
@@ -66,6 +69,18 @@ class NewtonState:
         self.pressure_after(s, self.p)
         self.g -= x
         self.at_base = False
+
+    def smooth_step(self, g0, x, sweeps, ratio):
+        """Replace the Newton step ``x`` from the iterate ``g0`` (arrays of the local rows; the next iterate
+        is g0 - x) by g0 - S(max(g0 - x, 0)), S ``sweeps`` projected Richardson sweeps (warmstart.smooth_gap,
+        Chebyshev nodes of [m_max / ``ratio``, m_max]; one FFT pair each).  The cached iterate's arrays
+        are the sweeps' memory, so it is invalid afterwards (the next ensure() computes the pressure).
+        Collective."""
+        g = np.subtract(g0, x, out=self.g)
+        np.maximum(g, 0.0, out=g)
+        self.valid = self.at_base = False
+        smooth_gap(self.op, g, sweeps, ratio, out=g, work=self.p)
+        np.subtract(g0, g, out=x)
 
     def pressure_after(self, s, out):
         """``out`` = p - (s - mean s), the pressure of the iterate g - x when m x = s (``out`` may be

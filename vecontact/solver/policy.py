@@ -34,6 +34,13 @@ subset.Mixed) while it must cut its residual by at most mixed_reduction_max: suc
 1e-7 of its start (the float32 rounding of A z), and the Newton residual that judges it is formed in
 float64.
 
+After a changing step on the free set the iterate is smoothed (``sweeps``, SolverSettings.step_sweeps:
+projected Richardson sweeps, warmstart.smooth_gap; the finest grid's solve only, contact.py gives the
+coarse ones 0): the loose solve leaves short-wave errors at the contact edges that would flip points in
+the next step [RESULTS.md].  Not after an exact step (it is the solution once its set is right), nor
+after a contact-set step, whose iterate has no pressure on F: the sweeps give it some, and the set
+then wanders [RESULTS.md].
+
 Free-set steps start as plain GMRES; after a changing free-set step that used the whole of an iteration
 cap of at least SolverSettings.cycle_cap (a tightened cap; the first one on grids of high stiffness
 range) they run as FGMRES over GMRES(free_cycle) cycles (``cycling``, ``record_iterations``).
@@ -89,6 +96,7 @@ class StepPolicy:
         self.single = False        # the latest step solves in single precision (single.py)
         self.mixed = False         # ... else in PETSc, its operator with mixed pairs (mixed_reduction)
         self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (record_iterations)
+        self.sweeps = 0            # smoothing sweeps on the iterate the latest step makes (snes.py)
         self._last = None          # (mode, change, cap) of the latest step
 
     def record_residual(self, residual):
@@ -117,6 +125,7 @@ class StepPolicy:
         s = self.settings
         ch = self.changes
         ch.append(change)
+        self.sweeps = s.step_sweeps if mode == "free" and change != 0 else 0
         if not self.own:
             return None
         if change == 0 and len(ch) >= 2 and ch[-2] == 0:

@@ -152,6 +152,8 @@ class SolverSettings:
                                "[RESULTS.md]", lo=0)
     smooth_ratio: float = _knob(6.0, "... their steps: Chebyshev nodes of [max|m_q| / this, max|m_q|] [RESULTS.md]",
                                 lo=1)
+    step_sweeps: int = _knob(4, "the same sweeps on the iterate after each Newton step on the finest grid solved on "
+                             "the free set while its active set changes (snes.py; 0: none) [RESULTS.md]", lo=0)
     bearing_area_min: float = _knob(1e-4, "cold start: Persson's A/A0 estimate clipped to at least this",
                                     lo=0, hi=1, lo_open=True)
     bearing_area_max: float = _knob(0.9, "... and to at most this", lo=0, hi=1, lo_open=True)

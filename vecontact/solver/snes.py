@@ -17,6 +17,8 @@ the contact set (SolverSettings.contact_step / contact_step_area), and how tight
 * on the free set (freeset.py): KSP ``preonly`` with a Python PC that sets x_C = r_C and runs an
   inner GMRES (the SNES's own prefix: ``-ksp_*``) on the stiffness of the free set, preconditioned by
   its compliance; vectors of (1 - A/A0) N^2 entries, 2 FFT pairs per inner iteration.
+After a free-set step whose set changed, the line search's pre-check smooths the next iterate
+(NewtonState.smooth_step, SolverSettings.step_sweeps).
 The Krylov tolerances are loose while the active set changes and exact once it stops (policy.py); an
 exact step's solve also ends as soon as its update meets the convergence test (measurestop.py); a
 changing step solves with a float32 Krylov basis (single.py, SolverSettings.changing_precision), an
@@ -96,11 +98,24 @@ class _Semismooth:
         self.mode = None                         # where the current step is solved
         self.modes = []                          # (Newton step, mode) at every switch
         self.lin_history = []                    # linear iterations before each Newton step
+        self.smoothed = 0                        # Newton steps whose iterate was smoothed (precheck)
         self.ksp = None
 
     def configure(self, snes, X):
         self.ksp = snes.getKSP()
         self.ksp.getPC().setPythonContext(self.steps["contact"])
+        snes.setLineSearchPreCheck(self.precheck)
+
+    def precheck(self, X, Y, snes=None):
+        """PETSc's hook between a step and its line search: with the policy's ``sweeps`` the step Y from X
+        becomes X - S(X - Y), the smoothed iterate (NewtonState.smooth_step).  Returns whether Y changed."""
+        sweeps = self.policy.sweeps
+        if not sweeps:
+            return False
+        st = self.state
+        st.smooth_step(st.view(X), st.view(Y, readonly=False), sweeps, self.settings.smooth_ratio)
+        self.smoothed += 1
+        return True
 
     def residual(self, snes, X, F):
         st = self.state
@@ -154,7 +169,7 @@ class _Semismooth:
                     float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()),
                     mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()),
                     carried_directions=sum(s.carried_directions for s in self.steps.values()),
-                    stalls=sum(s.stalls for s in self.steps.values()))
+                    stalls=sum(s.stalls for s in self.steps.values()), smoothed_steps=self.smoothed)
 
     def release(self):
         for step in self.steps.values():
