@@ -73,13 +73,13 @@ class NewtonState:
     def smooth_step(self, g0, x, sweeps, ratio):
         """Replace the Newton step ``x`` from the iterate ``g0`` (arrays of the local rows; the next iterate
         is g0 - x) by g0 - S(max(g0 - x, 0)), S ``sweeps`` projected Richardson sweeps (warmstart.smooth_gap,
-        Chebyshev nodes of [m_max / ``ratio``, m_max]; one FFT pair each).  The cached iterate's arrays
-        are the sweeps' memory, so it is invalid afterwards (the next ensure() computes the pressure).
+        Chebyshev nodes of [m_max / ``ratio``, m_max]; one FFT pair each).  The cached iterate's gap array
+        is the sweeps' memory, so it is invalid afterwards (the next ensure() computes the pressure).
         Collective."""
         g = np.subtract(g0, x, out=self.g)
         np.maximum(g, 0.0, out=g)
         self.valid = self.at_base = False
-        smooth_gap(self.op, g, sweeps, ratio, out=g, work=self.p)
+        smooth_gap(self.op, g, sweeps, ratio, out=g)
         np.subtract(g0, g, out=x)
 
     def pressure_after(self, s, out):

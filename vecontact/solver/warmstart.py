@@ -182,13 +182,13 @@ def chebyshev_nodes(lo, hi, n):
     return 0.5 * (hi + lo) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * k + 1) / (2 * int(n)))
 
 
-def smooth_gap(op, ghat, sweeps, ratio, out=None, work=None):
+def smooth_gap(op, ghat, sweeps, ratio, out=None):
     """Projected Richardson sweeps on the NCP (one FFT pair each), with Chebyshev step sizes:
     g <- max(0, g - p(g) / lambda_k), k = 1 .. ``sweeps``, lambda_k the Chebyshev nodes of
     [m_max / ``ratio``, m_max] (chebyshev_nodes), m_max = max_q |m_q| (nondimensional, sigma0 per h_rms).
     Returns the smoothed gap: ``out`` if given (it may be ``ghat``), else a new array, and ``ghat``
-    itself when there is nothing to do (no sweeps, or no stiffness); ``work``: a whole-grid scratch
-    array for the pressures (default: a new one).
+    itself when there is nothing to do (no sweeps, or no stiffness).  The pressures go to the operator's
+    scratch (``op.work``), which no caller holds across the sweeps.
 
     Without contact a Fourier mode of the gap's error is multiplied by prod_k (1 - m_q / lambda_k): by at
     most 1 / T_n((ratio + 1) / (ratio - 1)) (T_n the Chebyshev polynomial) for real m_q in [m_max / ratio,
@@ -199,7 +199,6 @@ def smooth_gap(op, ghat, sweeps, ratio, out=None, work=None):
     next step.  A viscoelastic m_q is complex, and the large steps can then grow some modes (RESULTS.md);
     the Newton steps correct them.  The sweeps replaced session 17's 16 damped-Jacobi sweeps (fewer FFT
     pairs for the same start; RESULTS.md, "`smooth_ratio`")."""
-    fft = op.fft
     if sweeps <= 0:
         return ghat
     mmax = op.stiffness_bounds()[1]
@@ -211,7 +210,7 @@ def smooth_gap(op, ghat, sweeps, ratio, out=None, work=None):
         g = out
         if g is not ghat:
             np.copyto(g, ghat)
-    p = fft.real_array() if work is None else work
+    p = op.work
     for lam in chebyshev_nodes(mmax / ratio, mmax, sweeps):
         op.pressure(g, p)
         p *= 1.0 / lam              # in place: the same numbers as a temporary, no N^2 allocation
