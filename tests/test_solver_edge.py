@@ -224,6 +224,37 @@ def test_edge_half_width_by_area_and_modulus_range():
     assert SolverSettings(edge_large_area=1.5).edge_half_width(1.0, 1.0) == 2
 
 
+def test_edge_half_width_by_stiffness_range():
+    """edge_window_high from a stiffness range of edge_high_range_min up (fast sliding on fine grids),
+    unless the large-set rule of slow sliding applies; edge_window below; nothing when edge_window is 0."""
+    st = SolverSettings()
+    r = st.edge_high_range_min
+    assert (st.edge_window_high, r) == (3, 1.5e5)
+    fast = 2.0 * st.edge_large_modulus_max
+    assert st.edge_half_width(fast, 0.05, r) == 3
+    assert st.edge_half_width(fast, 0.3, 10.0 * r) == 3
+    assert st.edge_half_width(fast, 0.05, np.nextafter(r, 0.0)) == 2
+    assert st.edge_half_width(fast, 0.05) == 2                       # no stiffness range given
+    assert st.edge_half_width(1.0, 0.9, 10.0 * r) == 1                # slow sliding, large set
+    assert st.edge_half_width(1.0, 0.05, 10.0 * r) == 3
+    assert SolverSettings(edge_window=0).edge_half_width(fast, 0.05, r) == 0
+    assert SolverSettings(edge_window_high=2).edge_half_width(fast, 0.05, r) == 2
+
+
+def test_the_step_takes_the_high_window_above_the_range():
+    """At fast sliding a contact-set step builds edge_window_high's term where the grid's stiffness
+    range reaches edge_high_range_min (lowered here to this 24^2 grid's), bit for bit the step whose
+    windows are all of that width, and edge_window's just below it."""
+    area, v = 0.05, 10.0
+    rng = _case(v=v, area=area)[2].stiffness_range()
+    its, y, w = _step_solve(SolverSettings(edge_high_range_min=rng), area, v)
+    assert w == 3
+    its_3, y_3, _ = _step_solve(SolverSettings(edge_window=3), area, v)
+    assert its == its_3 and np.array_equal(y, y_3)
+    assert _step_solve(SolverSettings(edge_high_range_min=np.nextafter(rng, np.inf)), area, v)[2] == 2
+    assert _step_solve(SolverSettings(), area, v)[2] == 2
+
+
 @pytest.mark.parametrize("area, v, expect", [(0.25, 0.01, 1), (0.05, 0.01, 2)])
 def test_the_step_takes_the_window_of_its_set(area, v, expect):
     """A contact-set step builds the term of the half width its set calls for (slow sliding: a low

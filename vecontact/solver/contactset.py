@@ -19,9 +19,9 @@ modulus.  It is preconditioned by the restricted stiffness B = P m_CC P (the opp
 preconditioner: m and c are exact inverses on the full grid, the restriction only perturbs it near the
 contact edges, so the iteration count grows only mildly with N).  At the edges B gets a local
 correction, a sparse term from small dense inverses of c on windows (edge.py; their half width
-SolverSettings.edge_half_width, by the set's size and the modulus's range; 0: none).  The Krylov
-vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little
-next to the FFTs.
+SolverSettings.edge_half_width, by the set's size and the modulus's and the stiffness's ranges; 0:
+none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
+orthogonalisation costs little next to the FFTs.
 
 A changing step's inner solve starts from the last step's directions, their products mapped to the new
 set with c's kernel columns of the points that changed (recycle.py, SolverSettings.carry_map_cost;
@@ -145,7 +145,8 @@ class ContactSetStep(SubsetStep):
         np.logical_not(act, out=self.free)
         self.select(np.flatnonzero(act.ravel()), n_active)
         st = self.settings
-        w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2)
+        w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2,
+                               self.op.stiffness_range())
         if w == 0:
             self.edge = None
         elif self.edge is None or self.edge.w != w:

@@ -122,6 +122,11 @@ class SolverSettings:
                                    "[RESULTS.md]", lo=0, hi=3)
     edge_large_area: float = _knob(0.2, "... that fraction of the grid's points (above 1: never)", lo=0)
     edge_large_modulus_max: float = _knob(60.0, "... that range of |E(q_x v)| over the grid", lo=0)
+    edge_window_high: int = _knob(3, "... the half width instead on grids whose stiffness's range max|m_q|/min|m_q| "
+                                  "is at least edge_high_range_min (fast sliding on fine grids; edge_window's "
+                                  "value turns it off) [RESULTS.md]", lo=0, hi=3)
+    edge_high_range_min: float = _knob(1.5e5, "... that range (2048^2 at 10 m/s, 4096^2 at 1 and 10 m/s for the "
+                                       "paper's compound)", lo=0)
     carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
                                   "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
@@ -188,16 +193,21 @@ class SolverSettings:
             return self.contact_step_area_small
         return self.contact_step_area
 
-    def edge_half_width(self, modulus_range, area):
+    def edge_half_width(self, modulus_range, area, stiffness_range=0.0):
         """The half width of the edge correction's windows (edge.py; 0: none) for a contact set holding
         the fraction ``area`` of the grid's points, on a grid whose modulus has the range max|E|/min|E|
-        over its q_x: edge_window_large on large sets at a low range (slow sliding), where the edges are
-        many and the set moves little between steps, so that the narrower windows' cheaper products and
-        builds outweigh their extra iterations; edge_window elsewhere, and nowhere when it is 0."""
+        over its q_x and whose stiffness has the range ``stiffness_range`` max|m_q|/min|m_q|:
+        edge_window_large on large sets at a low modulus range (slow sliding), where the edges are many
+        and the set moves little between steps, so that the narrower windows' cheaper products and builds
+        outweigh their extra iterations; else edge_window_high from a stiffness range of
+        edge_high_range_min (fast sliding on fine grids), where the wider windows' fewer iterations
+        outweigh their builds; edge_window elsewhere, and nowhere when it is 0."""
         if self.edge_window == 0:
             return 0
         if area >= self.edge_large_area and modulus_range <= self.edge_large_modulus_max:
             return self.edge_window_large
+        if stiffness_range >= self.edge_high_range_min:
+            return self.edge_window_high
         return self.edge_window
 
     def widest_step_area(self, n):
