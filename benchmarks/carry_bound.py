@@ -127,11 +127,13 @@ class ContactSystem(FreeSystem):
 
 
 def edge_of(op):
-    """The EdgeCorrection of SolverSettings' edge_window and edge_drop on the grid of ``op``, or None."""
+    """The EdgeCorrection of SolverSettings' edge_window, edge_drop and edge_rows on the grid of ``op``, or None."""
     from vecontact.solver import SolverSettings
     from vecontact.solver.edge import EdgeCorrection
     st = SolverSettings()
-    return EdgeCorrection(op, st.edge_window, st.edge_drop) if st.edge_window > 0 else None
+    if st.edge_window == 0:
+        return None
+    return EdgeCorrection(op, st.edge_window, st.edge_drop, rows=st.edge_rows(op.modulus_range()))
 
 
 def gcro(system, b, target, U=None, C=None, max_it=2000):

@@ -263,10 +263,10 @@ def test_carried_directions_collective(comm):
     assert abs(res.area - one.area) * N * N <= 4 and abs(res.mu / one.mu - 1) <= 1e-6, (res.summary(), one.summary())
 
 
-def _edge_terms(comm, h, sets, x):
-    """The edge term (edge.py, w = 2, drop 0.2) of ``x`` on the last of ``sets`` (whole-grid bool
-    arrays, built one after the other by one EdgeCorrection), on ``comm`` and on this rank alone:
-    (this rank's term on ``comm``, its rows of the one-rank term, the one-rank term)."""
+def _edge_terms(comm, h, sets, x, w=2, kind="inverse"):
+    """The edge term (edge.py, half width ``w``, drop 0.2, rows ``kind``) of ``x`` on the last of ``sets``
+    (whole-grid bool arrays, built one after the other by one EdgeCorrection), on ``comm`` and on this
+    rank alone: (this rank's term on ``comm``, its rows of the one-rank term, the one-rank term)."""
     from vecontact.core.pfft import SlabFFT
     from vecontact.solver.edge import EdgeCorrection
     from vecontact.solver.operator import ContactOperator
@@ -276,7 +276,7 @@ def _edge_terms(comm, h, sets, x):
         fft = SlabFFT(c, N, planner="estimate", wisdom_file=False)
         rows = slice(fft.row_start, fft.row_stop)
         slabs.append(rows)
-        ec = EdgeCorrection(ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows]), 2, 0.2)
+        ec = EdgeCorrection(ContactOperator(fft, L_PAPER, hn(), 1.0, 1e5, h[rows]), w, 0.2, rows=kind)
         for a in sets:
             ec.build(a[rows], np.flatnonzero(a[rows].ravel()))
         idx = np.flatnonzero(sets[-1][rows].ravel())
@@ -287,13 +287,17 @@ def _edge_terms(comm, h, sets, x):
     return two, full[slabs[0]][sets[-1][slabs[0]]], one
 
 
-@pytest.mark.parametrize("where", ["patches", "one slab"])
-def test_edge_term_collective(comm, where):
+@pytest.mark.parametrize("where, w, kind", [("patches", 2, "inverse"), ("one slab", 2, "inverse"),
+                                            ("patches", 3, "inverse"), ("patches", 1, "schur"),
+                                            ("patches", 3, "schur"), ("one slab", 3, "schur")])
+def test_edge_term_collective(comm, where, w, kind):
     """The edge correction of the contact-set preconditioner (edge.py) on 2 ranks: the halo rows of the
     contact set and of x come from the neighbouring slabs (and wrap around), so each rank's term is
     its rows of the one-rank term, to FFT rounding of the kernel (rtol 1e-12 of the term's largest
     entry).  "one slab": contact in the first rank's rows only, so the other has no edge point and no
-    mask to solve, and must still join the kernel's collective FFT pair (it once waited alone)."""
+    mask to solve, and must still join the kernel's collective FFT pair (it once waited alone).  Both
+    kinds of rows (the compliance's local inverses, the stiffness's Schur complements) and the half
+    widths the rules take (1, 2, 3: halos of as many rows)."""
     N = 32
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=9)
     act = h > np.quantile(h, 0.7)
@@ -301,9 +305,9 @@ def test_edge_term_collective(comm, where):
         act[N // comm.size - 1:] = False
         act[0] = False
     x = np.random.default_rng(3).standard_normal(N * N)
-    two, ref, one = _edge_terms(comm, h, [act], x)
+    two, ref, one = _edge_terms(comm, h, [act], x, w, kind)
     if where == "patches":
-        assert act[:2].any() and act[-2:].any() and act[N // 2 - 2:N // 2 + 2].any()     # halos hold contact
+        assert act[:w].any() and act[-w:].any() and act[N // 2 - w:N // 2 + w].any()     # halos hold contact
     assert np.abs(two - ref).max(initial=0.0) <= 1e-12 * np.abs(one).max() and np.abs(one).max() > 0
 
 

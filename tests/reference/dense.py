@@ -106,18 +106,30 @@ def compliance_matrix(M, method="kernel"):
     method="columns": column b = the Fourier definition applied to the unit vector e_b.
     """
     C = _compliance_symbol(M)
-    shape = M.shape
-    n = M.size
     if method == "columns":
+        shape = M.shape
+        n = M.size
         eye = np.eye(n).reshape((n,) + shape)
         axes = tuple(range(1, len(shape) + 1))
         cols = np.fft.ifftn(C * np.fft.fftn(eye, axes=axes), axes=axes)
         if np.abs(cols.imag).max() > 1e-12 * np.abs(cols.real).max():
             raise ValueError("compliance operator does not map real to real")
         return np.ascontiguousarray(cols.real.reshape(n, n).T)
-    kern = np.fft.ifftn(C)
+    return _convolution_matrix(C, "compliance")
+
+
+def stiffness_matrix(M):
+    """Explicit real matrix S (n x n) with (p - mean p).ravel() = S @ w.ravel(): the periodic convolution
+    with the stiffness's kernel ifft(M) (S has no q = 0 mode: its rows sum to zero)."""
+    return _convolution_matrix(M, "stiffness")
+
+
+def _convolution_matrix(symbol, name):
+    """The matrix of the periodic convolution whose Fourier symbol is ``symbol`` (1-D or 2-D)."""
+    shape = symbol.shape
+    kern = np.fft.ifftn(symbol)
     if np.abs(kern.imag).max() > 1e-12 * np.abs(kern.real).max():
-        raise ValueError("compliance kernel is not real (Nyquist handling?)")
+        raise ValueError(f"{name} kernel is not real (Nyquist handling?)")
     kern = kern.real
     if len(shape) == 1:
         N = shape[0]
@@ -127,7 +139,7 @@ def compliance_matrix(M, method="kernel"):
     di = (np.arange(N0)[:, None] - np.arange(N0)[None, :]) % N0
     dj = (np.arange(N1)[:, None] - np.arange(N1)[None, :]) % N1
     K4 = kern[di[:, None, :, None], dj[None, :, None, :]]  # [ia, ja, ib, jb]
-    return K4.reshape(n, n)
+    return K4.reshape(symbol.size, symbol.size)
 
 
 # ----------------------------------------------------------------------------- friction

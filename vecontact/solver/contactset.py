@@ -18,10 +18,10 @@ contact set), positive definite in the elastic case, non-symmetric but coercive 
 modulus.  It is preconditioned by the restricted stiffness B = P m_CC P (the opposite-order, "Calderon"
 preconditioner: m and c are exact inverses on the full grid, the restriction only perturbs it near the
 contact edges, so the iteration count grows only mildly with N).  At the edges B gets a local
-correction, a sparse term from small dense inverses of c on windows (edge.py; their half width
-SolverSettings.edge_half_width, by the set's size and the modulus's and the stiffness's ranges; 0:
-none).  The Krylov vectors live on C: at A/A0 = 5 % they are 20x shorter than the grid, so
-orthogonalisation costs little next to the FFTs.
+correction, a sparse term from small dense solves on windows (edge.py; their half width
+SolverSettings.edge_half_width, by the set's size and the modulus's and the stiffness's ranges, 0:
+none; their rows SolverSettings.edge_rows, by the modulus's range).  The Krylov vectors live on C: at
+A/A0 = 5 % they are 20x shorter than the grid, so orthogonalisation costs little next to the FFTs.
 
 A changing step's inner solve starts from the last step's directions, their products mapped to the new
 set with c's kernel columns of the points that changed (recycle.py, SolverSettings.carry_map_cost;
@@ -147,11 +147,12 @@ class ContactSetStep(SubsetStep):
         st = self.settings
         w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2,
                                self.op.stiffness_range())
+        rows = st.edge_rows(self.op.modulus_range())
         if w == 0:
             self.edge = None
-        elif self.edge is None or self.edge.w != w:
+        elif self.edge is None or self.edge.w != w or self.edge.rows != rows:
             # one term at a time (its arrays scale with the set); a new width costs one pair
-            self.edge = EdgeCorrection(self.op, w, st.edge_drop, st.store_headroom)
+            self.edge = EdgeCorrection(self.op, w, st.edge_drop, st.store_headroom, rows)
         if self.edge is not None:
             self.edge.build(act, self.idx)
 

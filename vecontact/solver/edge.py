@@ -8,18 +8,27 @@ whole grid m = c^-1, and for a subset C the exact inverse is the Schur complemen
 so B errs only near the contact edges, where m_CF is large: that is where the inner iterations go
 (RESULTS.md, "Growth of the oracle solve").  This module adds a local estimate of the missing term.
 For a contact point i with a free point within ``w`` grid points (Chebyshev), W the (2w+1)^2 window
-centred on i:
+centred on i, C_W and F_W its contact and free points:
 
-    (B_edge r)_i = (B r)_i + sum_{j in W and C} [ inv(c_{W and C})_ij - inv(c_W)_ij ] r_j,
+    (B_edge r)_i = (B r)_i - sum_{j in C_W} [ M_iF (M_FF)^-1 M_FC ]_ij r_j      (M on W, F = F_W, C = C_W)
 
-the local inverse of the compliance on the window's contact points minus that on the whole window
-(whose own edges m does not have).  Away from the edges both inverses are the same and the term
-vanishes.  The windows' inverses depend only on which window points are in contact (a mask of
-(2w+1)^2 bits), so one small dense solve is made per mask and grid (on the window's contact points or,
-when they are the majority, on its free points through a Schur complement), and reused by every later
-Newton step on that grid.  Applying the term is one sparse product on C (no FFT pair) and, on several ranks,
-an exchange of the contact values in w rows with each neighbouring slab; the set-up costs one FFT
-pair per grid (the compliance's kernel c(x)).
+with one of two local stand-ins M for the stiffness (``rows``):
+
+- ``"inverse"``: M = inv(c_W), the inverse of the compliance on the whole window.  The row is then the
+  centre row of inv(c on C_W) minus that of inv(c_W) (the same identity): the local inverse on the
+  window's contact points, less the window's own edges.  It treats every point outside W as free.
+- ``"schur"``: M = m_W, the stiffness's own kernel on the window: the exact Schur complement with the
+  free set cut to F_W, every point outside W counted in contact.
+
+Away from the edges the term vanishes in both.  The local inverses cut more iterations where they
+work, but at a high modulus range (fast sliding, a broad glass transition) they can make B indefinite
+and the steps stall; the Schur rows never did, and take the place of the local inverses there
+(SolverSettings.edge_rows; RESULTS.md, "Edge rows from the stiffness").  The rows depend only on which
+window points are in contact (a mask of (2w+1)^2 bits), so one small dense solve is made per mask and
+grid (for the local inverses on the smaller of C_W and F_W), and reused by every later Newton step on
+that grid.  Applying the term is one sparse product on C (no FFT pair) and, on several ranks, an
+exchange of the contact values in w rows with each neighbouring slab; the set-up costs one FFT pair
+per grid (the kernel of c, or of m).
 
 Units: nondimensional (operator.py); the term maps a gap error on C (h_rms) to a pressure (sigma0).
 """
@@ -42,12 +51,18 @@ class EdgeCorrection:
 
     ``op``: the ContactOperator of the grid; ``w``: the window's half width (grid points, >= 1);
     ``drop``: a row's entries below this fraction of its largest are dropped; ``headroom``: the kept
-    vectors of ``apply`` and ``add_to`` are made this much longer than a set needs.
+    vectors of ``apply`` and ``add_to`` are made this much longer than a set needs; ``rows``: the
+    stand-in for the stiffness on a window, "inverse" (inv(c_W)) or "schur" (m_W; module docstring).
     ``usable`` is False on a grid smaller than the window or where a rank holds fewer than w rows (the
     halo would span several slabs): the step then runs without the term (the same answer, more
     iterations)."""
 
-    def __init__(self, op, w, drop, headroom=0.0):
+    ROWS = ("inverse", "schur")
+
+    def __init__(self, op, w, drop, headroom=0.0, rows="inverse"):
+        if rows not in self.ROWS:
+            raise ValueError(f"edge rows {rows!r}: expected one of {', '.join(self.ROWS)}")
+        self.rows = rows
         self.op = op
         self.fft = fft = op.fft
         self.comm = fft.comm
@@ -60,7 +75,7 @@ class EdgeCorrection:
             raise ValueError(f"edge window half width {w}: expected 1, 2 or 3 (a window's mask is one int64)")
         # a window must not wrap onto itself, nor a halo span more than one neighbouring slab
         self.usable = 2 * w + 1 <= fft.N and self.comm.allreduce(fft.nrows, op=MPI.MIN) >= w
-        self._base = None                                    # (c_W, centre row of inv(c_W))
+        self._base = None                                    # M on the window (K x K)
         self._codes = np.zeros(0, dtype=np.int64)            # masks seen on this grid, sorted
         self._rows = np.zeros((0, self.da.size))             # their correction rows
         self.S = None
@@ -70,20 +85,23 @@ class EdgeCorrection:
 
     # ------------------------------------------------------------------ set-up
     def _kernel_table(self):
-        """c_W (K x K, c(x_a - x_b) over the window's points) and its inverse.  One FFT
-        pair: the compliance's response to a unit pressure at the origin, its values at the offsets
-        |d| <= 2w gathered to every rank."""
+        """M, the stiffness's stand-in on the window (K x K over its points): inv(c_W) or m_W (``rows``).
+        One FFT pair: the kernel's response to a unit at the origin (c's or m's), its values at the
+        offsets |d| <= 2w gathered to every rank."""
         if self._base is None:
             fft, w, N = self.fft, self.w, self.fft.N
-            kern = self.op.compliance_response()
+            if self.rows == "inverse":
+                kern = self.op.compliance_response()
+            else:
+                kern = self.op.stiffness_response()
             off = np.arange(-2 * w, 2 * w + 1)
             table = np.zeros((off.size, off.size))
             for i, r in enumerate(off % N):
                 if fft.row_start <= r < fft.row_stop:
                     table[i] = kern[r - fft.row_start, off % N]
             self.comm.Allreduce(MPI.IN_PLACE, table, op=MPI.SUM)
-            cW = table[(self.da[:, None] - self.da[None, :]) + 2 * w, (self.db[:, None] - self.db[None, :]) + 2 * w]
-            self._base = (cW, np.linalg.inv(cW))
+            kW = table[(self.da[:, None] - self.da[None, :]) + 2 * w, (self.db[:, None] - self.db[None, :]) + 2 * w]
+            self._base = (kW, np.linalg.inv(kW) if self.rows == "inverse" else kW)
         return self._base
 
     def _correction_rows(self, codes):
@@ -106,21 +124,20 @@ class EdgeCorrection:
 
     def _solve_masks(self, mask):
         """The correction rows of the window masks ``mask`` (n x K bool, the centre in contact), before
-        the drop: the centre row of inv(c on the window's contact points C) minus that of M = inv(c_W),
-        on C (zero on the free points F).  Each mask is solved in the smaller of two systems with the
-        same answer: c_CC^T x = e_centre on its p contact points, or, through the Schur complement
-        inv(c_CC) = M_CC - M_CF inv(M_FF) M_FC, the row -z^T M_FC with M_FF^T z = M_cF^T on its K - p
-        free points (an edge point has at least one).  Masks of one p are solved together."""
-        cW, M = self._kernel_table()
-        K = cW.shape[0]
+        the drop: the centre row of -M_CF inv(M_FF) M_FC on the mask's contact points C (zero on its
+        free points F; an edge point has at least one).  Masks of one size are solved together.  For
+        the local inverses (M = inv(c_W)) the same row is the centre row of inv(c_CC) minus that of M
+        on C, solved on the p contact points where they are the fewer (c_CC^T x = e_centre)."""
+        kW, M = self._kernel_table()
+        K = M.shape[0]
         centre = K // 2
         rows = np.zeros(mask.shape)
         p = mask.sum(axis=1)
         for size in np.unique(p):
             g = np.flatnonzero(p == size)
             C = np.nonzero(mask[g])[1].reshape(g.size, size)        # each mask's contact points, sorted
-            if size <= K - size:
-                x = np.linalg.solve(cW.T[C[:, :, None], C[:, None, :]], (C == centre)[..., None].astype(float))
+            if self.rows == "inverse" and size <= K - size:
+                x = np.linalg.solve(kW.T[C[:, :, None], C[:, None, :]], (C == centre)[..., None].astype(float))
                 rows[g[:, None], C] = x[..., 0] - M[centre][C]
             else:
                 F = np.nonzero(~mask[g])[1].reshape(g.size, K - size)

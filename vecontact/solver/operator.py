@@ -162,12 +162,20 @@ class ContactOperator:
     def compliance_response(self):
         """c(x) on the local rows: the gap (h_rms) under a unit pressure (sigma0) at the origin, the
         compliance's kernel, (c p)(x) = sum_y c(x - y) p(y) (one FFT pair)."""
+        return self._unit_response(self.c)
+
+    def stiffness_response(self):
+        """m(x) on the local rows: the pressure (sigma0) of a unit gap (h_rms) at the origin, the
+        stiffness's kernel, (m g)(x) = sum_y m(x - y) g(y) (zero sum: m has no q = 0 mode; one FFT pair)."""
+        return self._unit_response(self.m)
+
+    def _unit_response(self, multiplier):
         fft = self.fft
         d = fft.real_array()
         d[...] = 0.0
         if fft.row_start == 0:
             d[0, 0] = 1.0
-        return fft.apply(d, self.c, d)
+        return fft.apply(d, multiplier, d)
 
     def pressure(self, ghat, out=None):
         """p^ = 1 + m g^ + p_h (one FFT pair)."""

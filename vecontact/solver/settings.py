@@ -127,6 +127,10 @@ class SolverSettings:
                                   "value turns it off) [RESULTS.md]", lo=0, hi=3)
     edge_high_range_min: float = _knob(1.5e5, "... that range (2048^2 at 10 m/s, 4096^2 at 1 and 10 m/s for the "
                                        "paper's compound)", lo=0)
+    edge_schur_modulus_min: float = _knob(300.0, "... where the modulus's range max|E|/min|E| over the grid exceeds "
+                                          "this, the rows come from the stiffness on the window (\"schur\", edge.py) "
+                                          "instead of the compliance's local inverses, and the half width is "
+                                          "edge_window's (0: everywhere) [RESULTS.md]", lo=0)
     carry_directions: int = _knob(30, "a contact-set step's Krylov solve starts from this many of the last "
                                   "step's directions (carry.py, recycle.py; 0: none) [RESULTS.md]", lo=0)
     carry_memory: float = _knob(3e8, "... within this many bytes per rank", lo=0)
@@ -199,16 +203,27 @@ class SolverSettings:
         over its q_x and whose stiffness has the range ``stiffness_range`` max|m_q|/min|m_q|:
         edge_window_large on large sets at a low modulus range (slow sliding), where the edges are many
         and the set moves little between steps, so that the narrower windows' cheaper products and builds
-        outweigh their extra iterations; else edge_window_high from a stiffness range of
+        outweigh their extra iterations; edge_window where the rows are the Schur ones (``edge_rows``),
+        whose wider windows gain nothing; else edge_window_high from a stiffness range of
         edge_high_range_min (fast sliding on fine grids), where the wider windows' fewer iterations
         outweigh their builds; edge_window elsewhere, and nowhere when it is 0."""
         if self.edge_window == 0:
             return 0
         if area >= self.edge_large_area and modulus_range <= self.edge_large_modulus_max:
             return self.edge_window_large
+        if self.edge_rows(modulus_range) == "schur":
+            return self.edge_window
         if stiffness_range >= self.edge_high_range_min:
             return self.edge_window_high
         return self.edge_window
+
+    def edge_rows(self, modulus_range):
+        """The kind of the edge correction's rows (edge.EdgeCorrection ``rows``) on a grid whose modulus has
+        the range max|E|/min|E| over its q_x: the compliance's local inverses ("inverse"), which cut the
+        most iterations, up to edge_schur_modulus_min; above it the stiffness's Schur complement on the
+        window ("schur"), as the local inverses there can make the preconditioner indefinite and the
+        steps stall."""
+        return "schur" if modulus_range > self.edge_schur_modulus_min else "inverse"
 
     def widest_step_area(self, n):
         """The largest A/A0 step_area gives an n x n grid at any modulus range (the contact
