@@ -190,6 +190,32 @@ def test_a_broad_transition_solves_with_the_schur_rows():
     assert runs[0].fft_pairs <= 1.5 * runs[1].fft_pairs, (runs[0].fft_pairs, runs[1].fft_pairs)
 
 
+def test_a_stalled_solve_starts_again_without_the_edge_term():
+    """A rubber with a sharp glass transition (Havriliak-Negami alpha = beta = 0.8, loss angle up to 68
+    deg) at 1 mm/s on a 64^2 grid, 36 % in contact: with the edge term the contact-set steps stall (no
+    convergence in 100 Newton iterations, measured), so after edge_newton_max iterations the solve
+    starts again from its first iterate without the term, converges, reports the first attempt in
+    diagnostics["edge_retry"] and counts both attempts; its contact area is that of a solve without the
+    term from the start (one grid point), and a solve that converges in time is never retried."""
+    from reference.dense import random_surface as surface
+    from vecontact.solver import solve_contact
+    n = 64
+    h = surface(n, L_PAPER, small_spectrum(n), seed=4)
+    mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    cap = SolverSettings().edge_newton_max
+    r, plain = (solve_contact(fft, L_PAPER, h, mod, 0.001, 3e4, tolerance=1e-8, store=(), petsc_options=opts)
+                for opts in (None, ["-vc_edge_window 0"]))
+    assert r.converged and plain.converged
+    retry = r.diagnostics["edge_retry"]
+    assert retry is not None and retry["iterations"] == cap and retry["residual"] > 1e-8
+    assert r.iterations == cap + plain.iterations and r.fft_pairs > plain.fft_pairs
+    assert abs(r.area - plain.area) * n * n <= 1
+    assert plain.diagnostics["edge_retry"] is None
+    quick = solve_contact(fft, L_PAPER, h, mod, 0.001, 1e4, tolerance=1e-8, store=())
+    assert quick.converged and quick.iterations < cap and quick.diagnostics["edge_retry"] is None
+
+
 def test_edge_term_of_a_float32_vector():
     """A float32 C-vector (the float32 preconditioner's input) gives the term of its float64 value."""
     mod, h, op, act = _case()

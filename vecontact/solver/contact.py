@@ -157,7 +157,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 levels_info.append(dict(N=n, iterations=inf["iterations"],
                                         linear_iterations=inf["linear_iterations"],
                                         converged=inf["converged"], residual=inf["residual"],
-                                        reason=inf["reason"]))
+                                        reason=inf["reason"], edge_retry=inf.get("edge_retry")))
                 prev = (opc, gh, ph)
             if prev is not None:
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
@@ -175,7 +175,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         levels_info.append(dict(N=fft.N, iterations=info["iterations"],
                                 linear_iterations=info["linear_iterations"],
                                 converged=info["converged"], residual=info["residual"],
-                                reason=info["reason"]))
+                                reason=info["reason"], edge_retry=info.get("edge_retry")))
 
     # returned fields (SI): zero pressure off contact, zero gap in contact
     p_out = np.where(act, phat * op.sigma0, 0.0)
@@ -211,7 +211,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          mixed_pairs=int(info.get("mixed_pairs", 0)),
                          carried_directions=int(info.get("carried_directions", 0)),
                          stalls=int(info.get("stalls", 0)),
-                         smoothed_steps=int(info.get("smoothed_steps", 0))),
+                         smoothed_steps=int(info.get("smoothed_steps", 0)),
+                         edge_retry=info.get("edge_retry")),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,

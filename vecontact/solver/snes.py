@@ -35,6 +35,8 @@ from __future__ import annotations
 import gc
 import time
 
+from dataclasses import replace
+
 import numpy as np
 from mpi4py import MPI
 
@@ -99,7 +101,12 @@ class _Semismooth:
         self.modes = []                          # (Newton step, mode) at every switch
         self.lin_history = []                    # linear iterations before each Newton step
         self.smoothed = 0                        # Newton steps whose iterate was smoothed (precheck)
+        self.edge_used = False                   # a contact-set step ran with an edge term (edge.py)
         self.ksp = None
+
+    def edge_used_now(self):
+        """Whether a contact-set step has run with an edge term so far (_Convergence's edge_newton_max)."""
+        return self.edge_used
 
     def configure(self, snes, X):
         self.ksp = snes.getKSP()
@@ -136,6 +143,7 @@ class _Semismooth:
             self.mode = mode
             self.modes.append((len(self.lin_history) - 1, mode))
         step.set_active(st.act, st.nact)
+        self.edge_used = self.edge_used or getattr(step, "edge", None) is not None
         step.carry(change == 0)
         if len(self.lin_history) >= 2:
             self.policy.record_iterations(self.lin_history[-1] - self.lin_history[-2])
@@ -182,12 +190,15 @@ class _Semismooth:
 class _Convergence:
     """Our scale-free convergence test (operator.py measures <= tol), installed on the SNES."""
 
-    def __init__(self, state, policy, tol, monitor):
+    def __init__(self, state, policy, tol, monitor, edge_used=None, edge_newton_max=0):
         self.state = state
         self.policy = policy
         self.tol = tol
         self.monitor = monitor
         self.history = []      # (iteration, measure, FFT transforms so far)
+        self.edge_used = edge_used              # () -> whether an edge term has been used (or None)
+        self.edge_newton_max = int(edge_newton_max)
+        self.edge_stalled = False
 
     def __call__(self, snes, it, norms):
         PETSc = petsc()
@@ -204,6 +215,9 @@ class _Convergence:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
         if not np.isfinite(res):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
+        if self.edge_newton_max and it >= self.edge_newton_max and self.edge_used is not None and self.edge_used():
+            self.edge_stalled = True    # solved again without the term (ncp_solve)
+            return PETSc.SNES.ConvergedReason.DIVERGED_USER
         if it >= snes.getTolerances()[3]:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return PETSc.SNES.ConvergedReason.ITERATING
@@ -273,6 +287,10 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     put into the database under a solver prefix of their own; ``max_it``: Newton iterations.
     Returns (ghat, phat, active, info); info has iterations, linear_iterations, converged, reason,
     residual, measures, history, nchg, lin_history, modes, seconds, snes_type, ksp_type.
+    A solve not converged after SolverSettings.edge_newton_max Newton iterations with the contact-set
+    steps' edge term starts again from ``g0`` without it; info's iterations, linear_iterations and
+    seconds then count both attempts, and info["edge_retry"] holds the first one's (iterations,
+    linear_iterations, residual, seconds); the other entries are the second attempt's.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -281,7 +299,20 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     if thaw:
         gc.freeze()
     try:
-        return _ncp_solve(op, g0, tol, max_it, settings, options, monitor)
+        g, p, act, info = _ncp_solve(op, g0, tol, max_it, settings, options, monitor)
+        if not info.pop("edge_stalled"):
+            return g, p, act, info
+        # not converged after edge_newton_max Newton iterations with the edge term: it can make the
+        # contact-set steps' preconditioner indefinite (edge.py); m_CC alone cannot, so the solve starts
+        # again from g0 without it, and both attempts count
+        first = info
+        g, p, act, info = _ncp_solve(op, g0, tol, max_it, replace(settings, edge_window=0), options, monitor)
+        info.pop("edge_stalled")
+        info["edge_retry"] = dict(iterations=first["iterations"], linear_iterations=first["linear_iterations"],
+                                  residual=first["residual"], seconds=first["seconds"])
+        for key in ("iterations", "linear_iterations", "seconds"):
+            info[key] += first[key]
+        return g, p, act, info
     finally:
         if thaw:
             gc.unfreeze()
@@ -322,7 +353,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
             for step in steps.values():
                 stop.attach(step)
         form = _Semismooth(state, policy, steps, settings, stop)
-    conv = _Convergence(state, policy, tol, monitor)
+    conv = _Convergence(state, policy, tol, monitor, getattr(form, "edge_used_now", None), settings.edge_newton_max)
     _apply_global_options(PETSc, options)
     keys = _apply_options(PETSc, prefix, defaults, options)
     snes = X = Fv = J = None
@@ -353,7 +384,8 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
         info = dict(iterations=int(snes.getIterationNumber()), linear_iterations=int(lits), converged=converged,
                     reason="converged" if converged else reason.lower(), residual=float(res),
                     measures=meas, history=conv.history, seconds=time.perf_counter() - t0,
-                    snes_type=snes.getType(), ksp_type=snes.getKSP().getType(), **form.diagnostics(int(lits)))
+                    snes_type=snes.getType(), ksp_type=snes.getKSP().getType(), edge_stalled=conv.edge_stalled,
+                    **form.diagnostics(int(lits)))
         return state.g, state.p, act, info      # not copies: the state is dropped below
     finally:
         form.release()
