@@ -154,10 +154,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                 mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
                 gh, ph, _, inf = ncp_solve(opc, gc0, max(cfg.coarse_tol, tolerance), cfg.coarse_max_it,
                                            coarse_cfg, options, monitor=mon)
-                levels_info.append(dict(N=n, iterations=inf["iterations"],
-                                        linear_iterations=inf["linear_iterations"],
-                                        converged=inf["converged"], residual=inf["residual"],
-                                        reason=inf["reason"], edge_retry=inf.get("edge_retry")))
+                levels_info.append(_level_info(n, inf))
                 prev = (opc, gh, ph)
             if prev is not None:
                 g0 = prolong_gap(prev[0], prev[1], prev[2], op)
@@ -172,10 +169,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         maxit = cfg.newton_max_it if max_iterations is None else int(max_iterations)
         mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
         ghat, phat, act, info = ncp_solve(op, g0, tolerance, maxit, cfg, options, monitor=mon)
-        levels_info.append(dict(N=fft.N, iterations=info["iterations"],
-                                linear_iterations=info["linear_iterations"],
-                                converged=info["converged"], residual=info["residual"],
-                                reason=info["reason"], edge_retry=info.get("edge_retry")))
+        levels_info.append(_level_info(fft.N, info))
 
     # returned fields (SI): zero pressure off contact, zero gap in contact
     p_out = np.where(act, phat * op.sigma0, 0.0)
@@ -220,3 +214,9 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                         sigma0=float(sigma0), velocity=velocity),
     )
     return res
+
+
+def _level_info(n, info):
+    """One grid level's entry of diagnostics["levels"], from its ncp_solve info."""
+    return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
+                                                 "reason", "edge_retry")})

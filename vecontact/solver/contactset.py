@@ -145,9 +145,9 @@ class ContactSetStep(SubsetStep):
         np.logical_not(act, out=self.free)
         self.select(np.flatnonzero(act.ravel()), n_active)
         st = self.settings
-        w = st.edge_half_width(self.op.modulus_range(), float(n_active) / float(self.fft.N) ** 2,
-                               self.op.stiffness_range())
-        rows = st.edge_rows(self.op.modulus_range())
+        modulus_range = self.op.modulus_range()
+        w = st.edge_half_width(modulus_range, float(n_active) / float(self.fft.N) ** 2, self.op.stiffness_range())
+        rows = st.edge_rows(modulus_range)
         if w == 0:
             self.edge = None
         elif self.edge is None or self.edge.w != w or self.edge.rows != rows:

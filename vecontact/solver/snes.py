@@ -104,10 +104,6 @@ class _Semismooth:
         self.edge_used = False                   # a contact-set step ran with an edge term (edge.py)
         self.ksp = None
 
-    def edge_used_now(self):
-        """Whether a contact-set step has run with an edge term so far (_Convergence's edge_newton_max)."""
-        return self.edge_used
-
     def configure(self, snes, X):
         self.ksp = snes.getKSP()
         self.ksp.getPC().setPythonContext(self.steps["contact"])
@@ -190,13 +186,13 @@ class _Semismooth:
 class _Convergence:
     """Our scale-free convergence test (operator.py measures <= tol), installed on the SNES."""
 
-    def __init__(self, state, policy, tol, monitor, edge_used=None, edge_newton_max=0):
+    def __init__(self, state, policy, tol, monitor, form=None, edge_newton_max=0):
         self.state = state
         self.policy = policy
         self.tol = tol
         self.monitor = monitor
         self.history = []      # (iteration, measure, FFT transforms so far)
-        self.edge_used = edge_used              # () -> whether an edge term has been used (or None)
+        self.form = form                        # its edge_used (_Semismooth; the VI form has none)
         self.edge_newton_max = int(edge_newton_max)
         self.edge_stalled = False
 
@@ -215,7 +211,7 @@ class _Convergence:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
         if not np.isfinite(res):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
-        if self.edge_newton_max and it >= self.edge_newton_max and self.edge_used is not None and self.edge_used():
+        if self.edge_newton_max and it >= self.edge_newton_max and getattr(self.form, "edge_used", False):
             self.edge_stalled = True    # solved again without the term (ncp_solve)
             return PETSc.SNES.ConvergedReason.DIVERGED_USER
         if it >= snes.getTolerances()[3]:
@@ -353,7 +349,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
             for step in steps.values():
                 stop.attach(step)
         form = _Semismooth(state, policy, steps, settings, stop)
-    conv = _Convergence(state, policy, tol, monitor, getattr(form, "edge_used_now", None), settings.edge_newton_max)
+    conv = _Convergence(state, policy, tol, monitor, form, settings.edge_newton_max)
     _apply_global_options(PETSc, options)
     keys = _apply_options(PETSc, prefix, defaults, options)
     snes = X = Fv = J = None
