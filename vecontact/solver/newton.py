@@ -43,8 +43,14 @@ class NewtonState:
         return vec.getArray(readonly=readonly).reshape(self.shape)
 
     def ensure(self, g):
-        """Make sure (self.g, self.p) is the iterate g (recompute p if not)."""
-        if self.valid and np.array_equal(g, self.g):
+        """Make sure (self.g, self.p) is the iterate g (recompute p if not).  Collective: the ranks decide
+        together, since the pressure takes an FFT pair and a step can leave one rank's rows unchanged
+        (a full contact set's step changed only some rows: the ranks that skipped left the others
+        waiting in the transform)."""
+        same = self.valid and np.array_equal(g, self.g)
+        if self.comm.size > 1:
+            same = self.comm.allreduce(same, op=MPI.LAND)
+        if same:
             return
         np.copyto(self.g, g)
         self.op.pressure(self.g, self.p)
