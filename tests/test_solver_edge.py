@@ -216,6 +216,57 @@ def test_a_stalled_solve_starts_again_without_the_edge_term():
     assert quick.converged and quick.iterations < cap and quick.diagnostics["edge_retry"] is None
 
 
+def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_the_term():
+    """The sharp rubber at 1 cm/s on a 128^2 grid, 4 % in contact: on the 64^2 coarse grid the
+    contact-set steps with the edge term run to the whole ksp_max_it step after step (the stall's mark;
+    measured: 400, 400, 400 at its seventh to ninth steps). After edge_capped_max such steps in a row,
+    long before edge_newton_max, that grid starts again without the term, and so does the finer one:
+    from there on the solve is bit for bit the one without the term from the start, plus the first
+    attempt's pairs. With the rule off, the coarse grid runs on to coarse_max_it and the fine one
+    stalls too."""
+    from vecontact.solver import solve_contact
+    n = 128
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
+    mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    s = SolverSettings()
+    r, plain = (solve_contact(fft, L_PAPER, h, mod, 0.01, 3e4, tolerance=1e-8, store=("pressure",),
+                              petsc_options=opts) for opts in (None, ["-vc_edge_window 0"]))
+    assert r.converged and plain.converged
+    coarse, fine = r.diagnostics["levels"]
+    assert coarse["N"] == 64 and s.edge_capped_max < coarse["edge_retry"]["iterations"] < s.edge_newton_max
+    assert fine["edge_retry"] is None and r.diagnostics["edge_retry"] is None
+    assert coarse["iterations"] == coarse["edge_retry"]["iterations"] + plain.diagnostics["levels"][0]["iterations"]
+    assert np.array_equal(r.pressure, plain.pressure) and r.iterations == plain.iterations
+    assert r.fft_pairs_by_level[n] == plain.fft_pairs_by_level[n]
+    assert r.fft_pairs_by_level[64] > plain.fft_pairs_by_level[64]
+    off = solve_contact(fft, L_PAPER, h, mod, 0.01, 3e4, tolerance=1e-8, store=(),
+                        petsc_options=["-vc_edge_capped_max 0"])
+    assert off.diagnostics["levels"][0]["iterations"] == s.coarse_max_it
+    assert off.diagnostics["edge_retry"]["iterations"] == s.edge_newton_max
+    assert off.fft_pairs > 3 * r.fft_pairs
+
+
+def test_only_the_finest_grid_starts_again_by_its_iteration_count():
+    """edge_newton_max counts the finest grid's Newton iterations only: a coarse solve ends at
+    coarse_max_it anyway, and the study's coarse grids wander up to 49 iterations without a stall
+    (4096^2, 10 m/s, 19 %: its 512^2 grid). The paper-like rubber at 10 m/s on 128^2 with the count
+    lowered to 4: the 64^2 grid runs its 12 iterations with the term, the 128^2 one starts again after
+    4 and reaches the same contact set."""
+    from vecontact.solver import solve_contact
+    n = 128
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
+    mod = HavriliakNegami(3e6, 3e9, 0.5, 0.5, 1e-10, NU)
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    r, low = (solve_contact(fft, L_PAPER, h, mod, 10.0, 1e5, tolerance=1e-8, store=(), petsc_options=opts)
+              for opts in (None, ["-vc_edge_newton_max 4", "-vc_edge_capped_max 0"]))
+    assert r.converged and low.converged
+    (c0, f0), (c1, f1) = r.diagnostics["levels"], low.diagnostics["levels"]
+    assert c1["iterations"] == c0["iterations"] > 4 and c1["edge_retry"] is None
+    assert f0["edge_retry"] is None and f0["iterations"] > 4 and f1["edge_retry"]["iterations"] == 4
+    assert abs(r.area - low.area) * n * n <= 1
+
+
 def test_edge_term_of_a_float32_vector():
     """A float32 C-vector (the float32 preconditioner's input) gives the term of its float64 value."""
     mod, h, op, act = _case()

@@ -127,9 +127,11 @@ class SolverSettings:
                                   "value turns it off) [RESULTS.md]", lo=0, hi=3)
     edge_high_range_min: float = _knob(1.5e5, "... that range (2048^2 at 10 m/s, 4096^2 at 1 and 10 m/s for the "
                                        "paper's compound)", lo=0)
-    edge_newton_max: int = _knob(25, "... a grid's solve not converged after this many Newton iterations with the "
-                                 "term starts again without it (it can stall the steps; m_CC alone cannot; 0: "
-                                 "never) [RESULTS.md]", lo=0)
+    edge_newton_max: int = _knob(25, "... the finest grid's solve not converged after this many Newton iterations "
+                                 "with the term starts again without it (it can stall the steps; m_CC alone "
+                                 "cannot; 0: never) [RESULTS.md]", lo=0)
+    edge_capped_max: int = _knob(3, "... or sooner, once this many Newton steps in a row ran with the term and used "
+                                 "the whole ksp_max_it (the stall's mark; any grid; 0: never) [RESULTS.md]", lo=0)
     edge_schur_modulus_min: float = _knob(300.0, "... where the modulus's range max|E|/min|E| over the grid exceeds "
                                           "this, the rows come from the stiffness on the window (\"schur\", edge.py) "
                                           "instead of the compliance's local inverses, and the half width is "

@@ -102,6 +102,7 @@ class _Semismooth:
         self.lin_history = []                    # linear iterations before each Newton step
         self.smoothed = 0                        # Newton steps whose iterate was smoothed (precheck)
         self.edge_used = False                   # a contact-set step ran with an edge term (edge.py)
+        self.edge_step = False                   # the latest step did
         self.ksp = None
 
     def configure(self, snes, X):
@@ -139,7 +140,8 @@ class _Semismooth:
             self.mode = mode
             self.modes.append((len(self.lin_history) - 1, mode))
         step.set_active(st.act, st.nact)
-        self.edge_used = self.edge_used or getattr(step, "edge", None) is not None
+        self.edge_step = getattr(step, "edge", None) is not None
+        self.edge_used = self.edge_used or self.edge_step
         step.carry(change == 0)
         if len(self.lin_history) >= 2:
             self.policy.record_iterations(self.lin_history[-1] - self.lin_history[-2])
@@ -186,14 +188,15 @@ class _Semismooth:
 class _Convergence:
     """Our scale-free convergence test (operator.py measures <= tol), installed on the SNES."""
 
-    def __init__(self, state, policy, tol, monitor, form=None, edge_newton_max=0):
+    def __init__(self, state, policy, tol, monitor, form=None, settings=None):
         self.state = state
         self.policy = policy
         self.tol = tol
         self.monitor = monitor
         self.history = []      # (iteration, measure, FFT transforms so far)
         self.form = form                        # its edge_used (_Semismooth; the VI form has none)
-        self.edge_newton_max = int(edge_newton_max)
+        self.settings = settings                # edge_newton_max, edge_capped_max, ksp_max_it (None: no retry)
+        self.edge_capped = 0                    # Newton steps in a row with the term that used all of ksp_max_it
         self.edge_stalled = False
 
     def __call__(self, snes, it, norms):
@@ -211,12 +214,27 @@ class _Convergence:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
         if not np.isfinite(res):
             return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
-        if self.edge_newton_max and it >= self.edge_newton_max and getattr(self.form, "edge_used", False):
+        if self._edge_stalled(snes, it):
             self.edge_stalled = True    # solved again without the term (ncp_solve)
             return PETSc.SNES.ConvergedReason.DIVERGED_USER
         if it >= snes.getTolerances()[3]:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return PETSc.SNES.ConvergedReason.ITERATING
+
+    def _edge_stalled(self, snes, it):
+        """Whether the solve, not converged after Newton iteration ``it``, stalls on the edge term: it ran
+        with the term and reached edge_newton_max iterations, or its last edge_capped_max steps each ran
+        with the term and used the whole ksp_max_it (the steps' mark of an indefinite preconditioner;
+        the paper's contact-set steps never used it all, RESULTS.md; not counted when the user sets the
+        steps' Krylov tolerances, POLICY_OFF)."""
+        s, form = self.settings, self.form
+        if s is None or not getattr(form, "edge_used", False):
+            return False
+        if it > 0 and form.lin_history and self.policy.own:
+            last = form.linear_iterations(snes) - form.lin_history[-1]
+            self.edge_capped = self.edge_capped + 1 if form.edge_step and last >= s.ksp_max_it else 0
+        return bool((s.edge_newton_max and it >= s.edge_newton_max)
+                    or (s.edge_capped_max and self.edge_capped >= s.edge_capped_max))
 
 
 def check_options(options, key="numerics.petsc"):
@@ -284,8 +302,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     Returns (ghat, phat, active, info); info has iterations, linear_iterations, converged, reason,
     residual, measures, history, nchg, lin_history, modes, seconds, snes_type, ksp_type.
     A solve not converged after SolverSettings.edge_newton_max Newton iterations with the contact-set
-    steps' edge term starts again from ``g0`` without it; info's iterations, linear_iterations and
-    seconds then count both attempts, and info["edge_retry"] holds the first one's (iterations,
+    steps' edge term, or whose last edge_capped_max steps with the term each used the whole ksp_max_it,
+    starts again from ``g0`` without it; info's iterations, linear_iterations and seconds then count
+    both attempts, and info["edge_retry"] holds the first one's (iterations,
     linear_iterations, residual, seconds); the other entries are the second attempt's.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
@@ -298,9 +317,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         g, p, act, info = _ncp_solve(op, g0, tol, max_it, settings, options, monitor)
         if not info.pop("edge_stalled"):
             return g, p, act, info
-        # not converged after edge_newton_max Newton iterations with the edge term: it can make the
-        # contact-set steps' preconditioner indefinite (edge.py); m_CC alone cannot, so the solve starts
-        # again from g0 without it, and both attempts count
+        # stalled with the edge term (_Convergence._edge_stalled): it can make the contact-set steps'
+        # preconditioner indefinite (edge.py); m_CC alone cannot, so the solve starts again from g0
+        # without it, and both attempts count
         first = info
         g, p, act, info = _ncp_solve(op, g0, tol, max_it, replace(settings, edge_window=0), options, monitor)
         info.pop("edge_stalled")
@@ -349,7 +368,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
             for step in steps.values():
                 stop.attach(step)
         form = _Semismooth(state, policy, steps, settings, stop)
-    conv = _Convergence(state, policy, tol, monitor, form, settings.edge_newton_max)
+    conv = _Convergence(state, policy, tol, monitor, form, settings)
     _apply_global_options(PETSc, options)
     keys = _apply_options(PETSc, prefix, defaults, options)
     snes = X = Fv = J = None
