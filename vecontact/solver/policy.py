@@ -97,11 +97,18 @@ class StepPolicy:
         self.mixed = False         # ... else in PETSc, its operator with mixed pairs (mixed_reduction)
         self.cycling = False       # free-set steps as FGMRES over GMRES cycles from now on (record_iterations)
         self.sweeps = 0            # smoothing sweeps on the iterate the latest step makes (snes.py)
+        self.returned = False      # an iterate came back to the one two steps before (record_residual)
         self._last = None          # (mode, change, cap) of the latest step
 
     def record_residual(self, residual):
-        """The convergence measure of the latest iterate."""
-        self.residuals.append(residual)
+        """The convergence measure of the latest iterate.  A measure that repeats the one two iterates
+        back (to step_return_rtol) marks a return: the smoothed steps flip the same points to and fro;
+        no sweeps from then on (``sweeps``)."""
+        r = self.residuals
+        r.append(residual)
+        rtol = self.settings.step_return_rtol
+        if rtol and len(r) >= 3 and abs(r[-1] - r[-3]) <= rtol * r[-1]:
+            self.returned = True
 
     def record_iterations(self, iterations):
         """Krylov iterations of the latest step.  A changing free-set step that used the whole of a cap
@@ -125,7 +132,7 @@ class StepPolicy:
         s = self.settings
         ch = self.changes
         ch.append(change)
-        self.sweeps = s.step_sweeps if mode == "free" and change != 0 else 0
+        self.sweeps = s.step_sweeps if mode == "free" and change != 0 and not self.returned else 0
         if not self.own:
             return None
         if change == 0 and len(ch) >= 2 and ch[-2] == 0:

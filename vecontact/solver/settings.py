@@ -168,6 +168,9 @@ class SolverSettings:
                                 lo=1)
     step_sweeps: int = _knob(4, "the same sweeps on the iterate after each Newton step on the finest grid solved on "
                              "the free set while its active set changes (snes.py; 0: none) [RESULTS.md]", lo=0)
+    step_return_rtol: float = _knob(1e-6, "... and none once the measure comes back to the one two iterates before "
+                                    "within this relative difference: the smoothed steps flip the same points to "
+                                    "and fro (policy.py; 0: never) [RESULTS.md]", lo=0)
     bearing_area_min: float = _knob(1e-4, "cold start: Persson's A/A0 estimate clipped to at least this",
                                     lo=0, hi=1, lo_open=True)
     bearing_area_max: float = _knob(0.9, "... and to at most this", lo=0, hi=1, lo_open=True)
