@@ -304,8 +304,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     A solve not converged after SolverSettings.edge_newton_max Newton iterations with the contact-set
     steps' edge term, or whose last edge_capped_max steps with the term each used the whole ksp_max_it,
     starts again from ``g0`` without it; info's iterations, linear_iterations and seconds then count
-    both attempts, and info["edge_retry"] holds the first one's (iterations,
-    linear_iterations, residual, seconds); the other entries are the second attempt's.
+    both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
+    residual, seconds); the other entries are the second attempt's.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
