@@ -307,8 +307,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
     residual, seconds); the other entries are the second attempt's.  A solve still not converged
     starts again from ``g0`` with the line search SolverSettings.fallback_linesearch instead of full
-    steps (unless the user chose a line search or the VI method), counted the same way under
-    info["linesearch_retry"].
+    steps (unless the user chose a line search or the VI method), then with full steps from that
+    attempt's last iterate if it stopped short; all count, and info["linesearch_retry"] holds the
+    first attempt's.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -327,7 +328,7 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         # again from g0 with a line search on the residual's norm, and both attempts count
         again = _edge_attempts(op, g0, tol, max_it, settings, dict(opts, snes_linesearch_type=ls), monitor)
         if not again[3]["converged"]:
-            # the line search can end its solve just short of tol (the SLS rubber: 1.6-5.2e-8 for 1e-8,
+            # the line search can end its solve just short of tol (the SLS rubber: 1.1-5.2e-8 for 1e-8,
             # RESULTS.md): full steps from its last iterate, which they then converge from
             again = _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
         return _after(info, again, "linesearch_retry")
