@@ -33,6 +33,7 @@ def test_a_solve_that_full_steps_cannot_converge_starts_again_with_a_line_search
     assert [c[1].get("snes_linesearch_type") for c in calls] == [None, SolverSettings().fallback_linesearch, None]
     assert calls[0][0] is g0 and calls[1][0] is g0 and np.array_equal(calls[2][0], np.full(2, 2.0))
     assert all(c[1]["ksp_type"] == "fgmres" for c in calls)
+    assert calls[1][1]["snes_max_fail"] == "100" and "snes_max_fail" not in calls[2][1]
     assert info["converged"] and info["iterations"] == 60 and info["linear_iterations"] == 600
     assert info["seconds"] == 3.0 and info["linesearch_retry"]["iterations"] == 10
     for settings, options in ((SolverSettings(), {"snes_linesearch_type": "bt"}),

@@ -40,9 +40,10 @@ class SolverSettings:
 
     # --- Newton iterations and the Krylov tolerances of their steps (policy.py)
     newton_max_it: int = _knob(100, "Newton iterations on the finest grid (numerics.max_iterations wins)", lo=1)
-    fallback_linesearch: str = _knob("cp", "a finest-grid solve not converged in newton_max_it starts again from "
-                                     "its first iterate with this PETSc line search instead of full steps "
-                                     "(none: never) [RESULTS.md]", choices=("cp", "bt", "l2", "none"))
+    fallback_linesearch: str = _knob("bt", "a finest-grid solve not converged in newton_max_it starts again from "
+                                     "its first iterate with this PETSc line search instead of full steps, a "
+                                     "failed search still taking its step (none: never) [RESULTS.md]",
+                                     choices=("bt", "cp", "l2", "none"))
     lin_rtol: float = _knob(0.1, "Krylov rtol of a Newton step whose active set changed", lo=0, hi=1, lo_open=True)
     lin_rtol_min: float = _knob(1e-6, "lin_rtol is never tightened below this", lo=0, hi=1, lo_open=True)
     first_rtol_factor: float = _knob(0.1, "first step of each grid level: rtol = this x lin_rtol [RESULTS.md]",

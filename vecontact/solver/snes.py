@@ -325,11 +325,13 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
             return g, p, act, info
         # full steps of the primal-dual active-set method have no convergence guarantee for a
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
-        # again from g0 with a line search on the residual's norm, and both attempts count
-        again = _edge_attempts(op, g0, tol, max_it, settings, dict(opts, snes_linesearch_type=ls), monitor)
+        # again from g0 with a line search on the residual's norm, and every attempt counts
+        # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
+        lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts, snes_linesearch_type=ls)
+        again = _edge_attempts(op, g0, tol, max_it, settings, lsopts, monitor)
         if not again[3]["converged"]:
-            # the line search can end its solve just short of tol (the SLS rubber: 1.1-5.2e-8 for 1e-8,
-            # RESULTS.md): full steps from its last iterate, which they then converge from
+            # the line search can end its solve just short of tol (cp on the SLS rubber: 1.1-5.2e-8 for
+            # 1e-8, RESULTS.md): full steps from its last iterate, which they then converge from
             again = _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
         return _after(info, again, "linesearch_retry")
     finally:
