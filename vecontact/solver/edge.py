@@ -75,7 +75,7 @@ class EdgeCorrection:
             raise ValueError(f"edge window half width {w}: expected 1, 2 or 3 (a window's mask is one int64)")
         # a window must not wrap onto itself, nor a halo span more than one neighbouring slab
         self.usable = 2 * w + 1 <= fft.N and self.comm.allreduce(fft.nrows, op=MPI.MIN) >= w
-        self._base = None                                    # M on the window (K x K)
+        self._base = None                                    # (the kernel on the window, M): _kernel_table
         self._codes = np.zeros(0, dtype=np.int64)            # masks seen on this grid, sorted
         self._rows = np.zeros((0, self.da.size))             # their correction rows
         self.S = None
@@ -85,9 +85,9 @@ class EdgeCorrection:
 
     # ------------------------------------------------------------------ set-up
     def _kernel_table(self):
-        """M, the stiffness's stand-in on the window (K x K over its points): inv(c_W) or m_W (``rows``).
-        One FFT pair: the kernel's response to a unit at the origin (c's or m's), its values at the
-        offsets |d| <= 2w gathered to every rank."""
+        """(k_W, M): the kernel on the window (K x K over its points; c's or m's, by ``rows``) and M, the
+        stiffness's stand-in there: inv(c_W) or m_W itself.  One FFT pair: the kernel's response to a
+        unit at the origin, its values at the offsets |d| <= 2w gathered to every rank."""
         if self._base is None:
             fft, w, N = self.fft, self.w, self.fft.N
             if self.rows == "inverse":
