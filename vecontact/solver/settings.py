@@ -44,6 +44,9 @@ class SolverSettings:
                                      "its first iterate with this PETSc line search instead of full steps, a "
                                      "failed search still taking its step (none: never) [RESULTS.md]",
                                      choices=("bt", "cp", "l2", "none"))
+    fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
+                                "this many Newton iterations (with the edge term in use: first again without "
+                                "it; 0: never) [RESULTS.md]", lo=0)
     lin_rtol: float = _knob(0.1, "Krylov rtol of a Newton step whose active set changed", lo=0, hi=1, lo_open=True)
     lin_rtol_min: float = _knob(1e-6, "lin_rtol is never tightened below this", lo=0, hi=1, lo_open=True)
     first_rtol_factor: float = _knob(0.1, "first step of each grid level: rtol = this x lin_rtol [RESULTS.md]",

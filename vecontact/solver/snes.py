@@ -195,9 +195,10 @@ class _Convergence:
         self.monitor = monitor
         self.history = []      # (iteration, measure, FFT transforms so far)
         self.form = form                        # its edge_used (_Semismooth; the VI form has none)
-        self.settings = settings                # edge_newton_max, edge_capped_max, ksp_max_it (None: no retry)
+        self.settings = settings                # edge_newton_max, edge_capped_max, ksp_max_it, fallback_stall
         self.edge_capped = 0                    # Newton steps in a row with the term that used all of ksp_max_it
         self.edge_stalled = False
+        self.lowest = (np.inf, 1)               # the lowest measure since the first step, and its iteration
 
     def __call__(self, snes, it, norms):
         PETSc = petsc()
@@ -217,9 +218,25 @@ class _Convergence:
         if self._edge_stalled(snes, it):
             self.edge_stalled = True    # solved again without the term (ncp_solve)
             return PETSc.SNES.ConvergedReason.DIVERGED_USER
+        if self._measure_stalled(it, res):
+            # full steps that stopped gaining: with the term, solved again without it; without, with the
+            # fallback's line search (ncp_solve)
+            self.edge_stalled = bool(getattr(self.form, "edge_used", False))
+            return PETSc.SNES.ConvergedReason.DIVERGED_USER
         if it >= snes.getTolerances()[3]:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return PETSc.SNES.ConvergedReason.ITERATING
+
+    def _measure_stalled(self, it, res):
+        """Whether the measure has not reached a new lowest in the last SolverSettings.fallback_stall Newton
+        iterations (0: never), counted from the first step's: a good start (a coarse grid's) can measure
+        lower than the steps that must first move its set (64^2, sharp rubber: 8.4, then 129, 25, ...
+        converging at 26).  The paper's finest grids go at most 3 without a new lowest; full steps that
+        fail go 13-20 by their 20th iteration (RESULTS.md, "`fallback_stall`")."""
+        if it >= 1 and res < self.lowest[0]:
+            self.lowest = (res, it)
+        n = getattr(self.settings, "fallback_stall", 0)
+        return bool(n and it - self.lowest[1] >= n)
 
     def _edge_stalled(self, snes, it):
         """Whether the solve, not converged after Newton iteration ``it``, stalls on the edge term: it ran
@@ -305,11 +322,13 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     steps' edge term, or whose last edge_capped_max steps with the term each used the whole ksp_max_it,
     starts again from ``g0`` without it; info's iterations, linear_iterations and seconds then count
     both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
-    residual, seconds); the other entries are the second attempt's.  A solve still not converged
-    starts again from ``g0`` with the line search SolverSettings.fallback_linesearch instead of full
-    steps (unless the user chose a line search or the VI method), then with full steps from that
-    attempt's last iterate if it stopped short; all count, and info["linesearch_retry"] holds the
-    first attempt's.
+    residual, seconds); the other entries are the second attempt's.  A solve still not converged, or
+    whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use: the
+    retry without it), starts again from ``g0`` with the line search SolverSettings.fallback_linesearch
+    instead of full steps (unless the user chose a line search or the VI method; without the term if
+    it was retried), then with full steps from that attempt's last iterate if it stopped short; those
+    two run to ``max_it``.  All count, info["linesearch_retry"] holds the first attempt's, and
+    info["edge_retry"] the full steps' retry if there was one.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -318,11 +337,17 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     if thaw:
         gc.freeze()
     try:
-        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings, options, monitor)
         ls = settings.fallback_linesearch
         opts = dict(options or {})
-        if info["converged"] or ls == "none" or "snes_linesearch_type" in opts or _is_vi(opts):
+        if ls == "none" or "snes_linesearch_type" in opts or _is_vi(opts):
+            return _edge_attempts(op, g0, tol, max_it, replace(settings, fallback_stall=0), options, monitor)
+        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings, options, monitor)
+        if info["converged"]:
             return g, p, act, info
+        # the line search's attempt and after run to max_it, and without the edge term if it stalled the
+        # full steps (with it the attempt stalled again in 7 of 10 such solves, RESULTS.md)
+        settings = replace(settings, fallback_stall=0, edge_window=0 if info.get("edge_retry") else
+                           settings.edge_window)
         # full steps of the primal-dual active-set method have no convergence guarantee for a
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
         # again from g0 with a line search on the residual's norm, and every attempt counts
@@ -333,6 +358,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
             # the line search can end its solve just short of tol (cp on the SLS rubber: 1.1-5.2e-8 for
             # 1e-8, RESULTS.md): full steps from its last iterate, which they then converge from
             again = _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
+        if "edge_retry" in info:        # the later attempts went without the term: the full steps' retry
+            again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "linesearch_retry")
     finally:
         if thaw:
