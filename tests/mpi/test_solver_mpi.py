@@ -153,6 +153,35 @@ def test_stall_retry_collective(comm):
     assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0
 
 
+def test_line_search_fallback_collective(comm):
+    """The fallback after full steps stop gaining (fallback_stall, then fallback_linesearch) decides on
+    every rank alike (the global measure) and builds its line-search SNES collectively: the SLS rubber
+    at 1 mm/s on the tests' 64^2 surface, 18 % in contact (tests/test_solver_linesearch.py), on 2 ranks
+    guarded by faulthandler (a hang fails the stage after 120 s), and on 1. Both take the line search;
+    their paths depend on the transforms' rounding, their answers do not: the same contact set, the
+    pressure to 1e-6 of sigma0 (both meet the measures' 1e-8; measured 1.1e-8 on 2 ranks, 5e-9 on 3),
+    each a contact solution on its fields."""
+    import faulthandler
+    from mpi4py import MPI
+    from vecontact.physics.modulus import SLS
+    N = 64
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=4)
+    mod = SLS(3e6, 3e8, 1e-5, NU)
+    sigma0 = 1e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * 0.001]))[0]))
+    faulthandler.dump_traceback_later(120, exit=True)
+    try:
+        two, f2 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=comm)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    one, f1 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=MPI.COMM_SELF)
+    same_on_all_ranks(comm, two)
+    for r, f in ((two, f2), (one, f1)):
+        assert r.converged and r.diagnostics["linesearch_retry"] is not None
+        assert_contact_solution(r, f, h, sigma0)
+    assert two.area == one.area
+    assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0
+
+
 @pytest.mark.slow
 def test_mu_vs_mu_geometric_paper_512_collective(comm):
     """Paper's smallest case (q1 = 32 q0, N = 512, null band 8) on 2 ranks: mu_geometric = mu within 2%."""
