@@ -27,6 +27,20 @@ def same_on_all_ranks(comm, res):
     assert all(np.array_equal(vals, a) for a in allv), allv
 
 
+def on_all_ranks_and_one(comm, h, mod, v, sigma0):
+    """solve_full on ``comm``, guarded by faulthandler (a hang fails the stage after 120 s), checked
+    the same on every rank, then on one rank: ((res, fields) on comm, (res, fields) on one)."""
+    import faulthandler
+    from mpi4py import MPI
+    faulthandler.dump_traceback_later(120, exit=True)
+    try:
+        two = solve_full(h, L_PAPER, mod, v, sigma0, comm=comm)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    same_on_all_ranks(comm, two[0])
+    return two, solve_full(h, L_PAPER, mod, v, sigma0, comm=MPI.COMM_SELF)
+
+
 @pytest.mark.parametrize("N,name,v,sigma0", [(24, "hn", 30.0, 1e5), (32, "hn", 1.0, 2e4), (32, "elastic", 0.0, 5e3)])
 def test_dense_collective(comm, N, name, v, sigma0):
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=N)
@@ -116,18 +130,10 @@ def test_a_step_that_leaves_a_rank_unchanged_collective(comm):
     collective the other rank skipped the pressure's FFT pair and both waited for ever (guarded here by
     faulthandler: a hang fails the stage after 120 s); now the solve matches the one-rank solve (the
     same Newton iterations and contact area, pressure to 1e-9 of sigma0)."""
-    import faulthandler
-    from mpi4py import MPI
     N, sigma0 = 64, 2e5
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=4)
     mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
-    faulthandler.dump_traceback_later(120, exit=True)
-    try:
-        two, f2 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=comm)
-    finally:
-        faulthandler.cancel_dump_traceback_later()
-    one, f1 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=MPI.COMM_SELF)
-    same_on_all_ranks(comm, two)
+    (two, f2), (one, f1) = on_all_ranks_and_one(comm, h, mod, 0.001, sigma0)
     assert two.converged and one.converged and 0.99 < two.area < 1.0
     assert two.iterations == one.iterations and two.area == one.area
     assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-9 * sigma0
@@ -161,20 +167,12 @@ def test_line_search_fallback_collective(comm):
     their paths depend on the transforms' rounding, their answers do not: the same contact set, the
     pressure to 1e-6 of sigma0 (both meet the measures' 1e-8; measured 1.1e-8 on 2 ranks, 5e-9 on 3),
     each a contact solution on its fields."""
-    import faulthandler
-    from mpi4py import MPI
     from vecontact.physics.modulus import SLS
     N = 64
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=4)
     mod = SLS(3e6, 3e8, 1e-5, NU)
     sigma0 = 1e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * 0.001]))[0]))
-    faulthandler.dump_traceback_later(120, exit=True)
-    try:
-        two, f2 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=comm)
-    finally:
-        faulthandler.cancel_dump_traceback_later()
-    one, f1 = solve_full(h, L_PAPER, mod, 0.001, sigma0, comm=MPI.COMM_SELF)
-    same_on_all_ranks(comm, two)
+    (two, f2), (one, f1) = on_all_ranks_and_one(comm, h, mod, 0.001, sigma0)
     for r, f in ((two, f2), (one, f1)):
         assert r.converged and r.diagnostics["linesearch_retry"] is not None
         assert_contact_solution(r, f, h, sigma0)
