@@ -160,8 +160,8 @@ def test_edge_rows_by_modulus_range():
     assert st.edge_rows(m) == "inverse" and st.edge_rows(1.0) == "inverse"
     assert st.edge_rows(np.nextafter(m, np.inf)) == "schur"
     r = 10.0 * st.edge_high_range_min
-    assert st.edge_half_width(m, 0.05, r) == st.edge_window_high
-    assert st.edge_half_width(np.nextafter(m, np.inf), 0.05, r) == st.edge_window
+    assert st.edge_half_width(m, 0.05, r, 4096) == st.edge_window_high
+    assert st.edge_half_width(np.nextafter(m, np.inf), 0.05, r, 4096) == st.edge_window
     assert SolverSettings(edge_schur_modulus_min=0.0).edge_rows(1.0) == "schur"
     # the paper's rubber keeps the local inverses on every grid of its study and benchmark: its largest
     # range there is 4096^2 at 10 m/s (252.6), the ratio of |E| at the grid's largest and smallest q_x
@@ -395,33 +395,38 @@ def test_edge_half_width_by_area_and_modulus_range():
 
 
 def test_edge_half_width_by_stiffness_range():
-    """edge_window_high from a stiffness range of edge_high_range_min up (fast sliding on fine grids),
-    unless the large-set rule of slow sliding applies; edge_window below; nothing when edge_window is 0."""
+    """edge_window_high from a stiffness range of edge_high_range_min up (fast sliding on fine grids) on
+    grids from edge_high_min_n up, unless the large-set rule of slow sliding applies; edge_window below
+    either; nothing when edge_window is 0."""
     st = SolverSettings()
-    r = st.edge_high_range_min
-    assert (st.edge_window_high, r) == (3, 1.5e5)
+    r, n = st.edge_high_range_min, st.edge_high_min_n
+    assert (st.edge_window_high, r, n) == (3, 1.5e5, 2048)
     fast = 2.0 * st.edge_large_modulus_max
-    assert st.edge_half_width(fast, 0.05, r) == 3
-    assert st.edge_half_width(fast, 0.3, 10.0 * r) == 3
-    assert st.edge_half_width(fast, 0.05, np.nextafter(r, 0.0)) == 2
-    assert st.edge_half_width(fast, 0.05) == 2                       # no stiffness range given
-    assert st.edge_half_width(1.0, 0.9, 10.0 * r) == 1                # slow sliding, large set
-    assert st.edge_half_width(1.0, 0.05, 10.0 * r) == 3
-    assert SolverSettings(edge_window=0).edge_half_width(fast, 0.05, r) == 0
-    assert SolverSettings(edge_window_high=2).edge_half_width(fast, 0.05, r) == 2
+    assert st.edge_half_width(fast, 0.05, r, n) == 3
+    assert st.edge_half_width(fast, 0.3, 10.0 * r, 4096) == 3
+    assert st.edge_half_width(fast, 0.05, np.nextafter(r, 0.0), n) == 2
+    assert st.edge_half_width(fast, 0.05, 10.0 * r, n // 2) == 2      # 1024^2: 5 x 5 at any range
+    assert st.edge_half_width(fast, 0.05) == 2                       # no stiffness range or grid given
+    assert st.edge_half_width(1.0, 0.9, 10.0 * r, n) == 1             # slow sliding, large set
+    assert st.edge_half_width(1.0, 0.05, 10.0 * r, n) == 3
+    assert SolverSettings(edge_window=0).edge_half_width(fast, 0.05, r, n) == 0
+    assert SolverSettings(edge_window_high=2).edge_half_width(fast, 0.05, r, n) == 2
 
 
 def test_the_step_takes_the_high_window_above_the_range():
     """At fast sliding a contact-set step builds edge_window_high's term where the grid's stiffness
-    range reaches edge_high_range_min (lowered here to this 24^2 grid's), bit for bit the step whose
-    windows are all of that width, and edge_window's just below it."""
+    range reaches edge_high_range_min and its N edge_high_min_n (both lowered here to this 24^2 grid's),
+    bit for bit the step whose windows are all of that width, and edge_window's just below either."""
     area, v = 0.05, 10.0
-    rng = _case(v=v, area=area)[2].stiffness_range()
-    its, y, w = _step_solve(SolverSettings(edge_high_range_min=rng), area, v)
+    op = _case(v=v, area=area)[2]
+    rng, n = op.stiffness_range(), op.fft.N
+    its, y, w = _step_solve(SolverSettings(edge_high_range_min=rng, edge_high_min_n=n), area, v)
     assert w == 3
     its_3, y_3, _ = _step_solve(SolverSettings(edge_window=3), area, v)
     assert its == its_3 and np.array_equal(y, y_3)
-    assert _step_solve(SolverSettings(edge_high_range_min=np.nextafter(rng, np.inf)), area, v)[2] == 2
+    assert _step_solve(SolverSettings(edge_high_range_min=np.nextafter(rng, np.inf), edge_high_min_n=n),
+                       area, v)[2] == 2
+    assert _step_solve(SolverSettings(edge_high_range_min=rng, edge_high_min_n=n + 1), area, v)[2] == 2
     assert _step_solve(SolverSettings(), area, v)[2] == 2
 
 

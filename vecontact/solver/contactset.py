@@ -146,7 +146,8 @@ class ContactSetStep(SubsetStep):
         self.select(np.flatnonzero(act.ravel()), n_active)
         st = self.settings
         modulus_range = self.op.modulus_range()
-        w = st.edge_half_width(modulus_range, float(n_active) / float(self.fft.N) ** 2, self.op.stiffness_range())
+        w = st.edge_half_width(modulus_range, float(n_active) / float(self.fft.N) ** 2, self.op.stiffness_range(),
+                               self.fft.N)
         rows = st.edge_rows(modulus_range)
         if w == 0:
             self.edge = None

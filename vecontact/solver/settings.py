@@ -134,6 +134,8 @@ class SolverSettings:
                                   "value turns it off) [RESULTS.md]", lo=0, hi=3)
     edge_high_range_min: float = _knob(1.5e5, "... that range (2048^2 at 10 m/s, 4096^2 at 1 and 10 m/s for the "
                                        "paper's compound)", lo=0)
+    edge_high_min_n: int = _knob(2048, "... on grids of at least this N (on 1024^2 they gained at most 0.91x "
+                                 "and stalled a broad rubber: 3-21x) [RESULTS.md]", lo=1)
     edge_newton_max: int = _knob(25, "... the finest grid's solve not converged after this many Newton iterations "
                                  "with the term starts again without it (it can stall the steps; m_CC alone "
                                  "cannot; 0: never) [RESULTS.md]", lo=0)
@@ -212,23 +214,24 @@ class SolverSettings:
             return self.contact_step_area_small
         return self.contact_step_area
 
-    def edge_half_width(self, modulus_range, area, stiffness_range=0.0):
+    def edge_half_width(self, modulus_range, area, stiffness_range=0.0, n=0):
         """The half width of the edge correction's windows (edge.py; 0: none) for a contact set holding
-        the fraction ``area`` of the grid's points, on a grid whose modulus has the range max|E|/min|E|
-        over its q_x and whose stiffness has the range ``stiffness_range`` max|m_q|/min|m_q|:
+        the fraction ``area`` of the points of an ``n`` x ``n`` grid, whose modulus has the range
+        max|E|/min|E| over its q_x and whose stiffness has the range ``stiffness_range`` max|m_q|/min|m_q|:
         edge_window_large on large sets at a low modulus range (slow sliding), where the edges are many
         and the set moves little between steps, so that the narrower windows' cheaper products and builds
         outweigh their extra iterations; edge_window where the rows are the Schur ones (``edge_rows``),
         whose wider windows gain nothing; else edge_window_high from a stiffness range of
-        edge_high_range_min (fast sliding on fine grids), where the wider windows' fewer iterations
-        outweigh their builds; edge_window elsewhere, and nowhere when it is 0."""
+        edge_high_range_min (fast sliding on fine grids) on grids from edge_high_min_n up, where the
+        wider windows' fewer iterations outweigh their builds; edge_window elsewhere, and nowhere when
+        it is 0."""
         if self.edge_window == 0:
             return 0
         if area >= self.edge_large_area and modulus_range <= self.edge_large_modulus_max:
             return self.edge_window_large
         if self.edge_rows(modulus_range) == "schur":
             return self.edge_window
-        if stiffness_range >= self.edge_high_range_min:
+        if stiffness_range >= self.edge_high_range_min and n >= self.edge_high_min_n:
             return self.edge_window_high
         return self.edge_window
 
