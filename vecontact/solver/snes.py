@@ -339,10 +339,11 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     try:
         ls = settings.fallback_linesearch
         opts = dict(options or {})
-        if ls == "none" or "snes_linesearch_type" in opts or _is_vi(opts):
-            return _edge_attempts(op, g0, tol, max_it, replace(settings, fallback_stall=0), options, monitor)
-        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings, options, monitor)
-        if info["converged"]:
+        fallback = not (ls == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
+        # the stall rule hands over to the line search: none without it
+        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
+                                         replace(settings, fallback_stall=0), options, monitor)
+        if info["converged"] or not fallback:
             return g, p, act, info
         # the line search's attempt and after run to max_it, and without the edge term if it stalled the
         # full steps (with it the attempt stalled again in 7 of 10 such solves, RESULTS.md)
