@@ -27,18 +27,19 @@ def same_on_all_ranks(comm, res):
     assert all(np.array_equal(vals, a) for a in allv), allv
 
 
-def on_all_ranks_and_one(comm, h, mod, v, sigma0):
-    """solve_full on ``comm``, guarded by faulthandler (a hang fails the stage after 120 s), checked
-    the same on every rank, then on one rank: ((res, fields) on comm, (res, fields) on one)."""
+def on_all_ranks_and_one(comm, h, mod, v, sigma0, **kw):
+    """solve_full on ``comm`` (keywords ``kw`` passed on), guarded by faulthandler (a hang fails the
+    stage after 120 s), checked the same on every rank, then on one rank: ((res, fields) on comm,
+    (res, fields) on one)."""
     import faulthandler
     from mpi4py import MPI
     faulthandler.dump_traceback_later(120, exit=True)
     try:
-        two = solve_full(h, L_PAPER, mod, v, sigma0, comm=comm)
+        two = solve_full(h, L_PAPER, mod, v, sigma0, comm=comm, **kw)
     finally:
         faulthandler.cancel_dump_traceback_later()
     same_on_all_ranks(comm, two[0])
-    return two, solve_full(h, L_PAPER, mod, v, sigma0, comm=MPI.COMM_SELF)
+    return two, solve_full(h, L_PAPER, mod, v, sigma0, comm=MPI.COMM_SELF, **kw)
 
 
 @pytest.mark.parametrize("N,name,v,sigma0", [(24, "hn", 30.0, 1e5), (32, "hn", 1.0, 2e4), (32, "elastic", 0.0, 5e3)])
@@ -159,22 +160,24 @@ def test_stall_retry_collective(comm):
     assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0
 
 
-def test_line_search_fallback_collective(comm):
-    """The fallback after full steps stop gaining (fallback_stall, then fallback_linesearch) decides on
-    every rank alike (the global measure) and builds its line-search SNES collectively: the SLS rubber
-    at 1 mm/s on the tests' 64^2 surface, 18 % in contact (tests/test_solver_linesearch.py), on 2 ranks
-    guarded by faulthandler (a hang fails the stage after 120 s), and on 1. Both take the line search;
-    their paths depend on the transforms' rounding, their answers do not: the same contact set, the
-    pressure to 1e-6 of sigma0 (both meet the measures' 1e-8; measured 1.1e-8 on 2 ranks, 5e-9 on 3),
-    each a contact solution on its fields."""
+@pytest.mark.parametrize("fallback", ["bt", "vi"])
+def test_fallback_collective(comm, fallback):
+    """The fallback after full steps stop gaining (fallback_stall, then the line search or the VI
+    method) decides on every rank alike (the global measure) and builds its SNES collectively (the VI
+    method's sub-matrices too): the SLS rubber at 1 mm/s on the tests' 64^2 surface, 18 % in contact
+    (tests/test_solver_fallback.py), on 2 ranks guarded by faulthandler (a hang fails the stage after
+    120 s), and on 1. Both take the fallback; their paths depend on the transforms' rounding, their
+    answers do not: the same contact set, the pressure to 1e-6 of sigma0 (both meet the measures' 1e-8;
+    measured 1.1e-8 on 2 ranks, 5e-9 on 3, with bt), each a contact solution on its fields."""
     from vecontact.physics.modulus import SLS
     N = 64
     h = random_surface(N, L_PAPER, small_spectrum(N), seed=4)
     mod = SLS(3e6, 3e8, 1e-5, NU)
     sigma0 = 1e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * 0.001]))[0]))
-    (two, f2), (one, f1) = on_all_ranks_and_one(comm, h, mod, 0.001, sigma0)
+    (two, f2), (one, f1) = on_all_ranks_and_one(comm, h, mod, 0.001, sigma0,
+                                                petsc_options=["-vc_fallback", fallback])
     for r, f in ((two, f2), (one, f1)):
-        assert r.converged and r.diagnostics["linesearch_retry"] is not None
+        assert r.converged and r.diagnostics["fallback_retry"] is not None
         assert_contact_solution(r, f, h, sigma0)
     assert two.area == one.area
     assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0

@@ -138,7 +138,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
             # No retry after edge_newton_max iterations there, nor with a line search: a coarse solve ends
             # at coarse_max_it anyway, and the study's coarse grids wander up to 49 iterations without a
             # stall (RESULTS.md)
-            coarse_cfg = replace(cfg, step_sweeps=0, edge_newton_max=0, fallback_linesearch="none")
+            coarse_cfg = replace(cfg, step_sweeps=0, edge_newton_max=0, fallback="none")
             for n in lv:
                 fc = coarse_fft(fft, n)
                 touch(fc)
@@ -214,7 +214,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          carried_directions=int(info.get("carried_directions", 0)),
                          stalls=int(info.get("stalls", 0)),
                          smoothed_steps=int(info.get("smoothed_steps", 0)),
-                         edge_retry=info.get("edge_retry"), linesearch_retry=info.get("linesearch_retry")),
+                         edge_retry=info.get("edge_retry"), fallback_retry=info.get("fallback_retry")),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
@@ -227,4 +227,4 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
 def _level_info(n, info):
     """One grid level's entry of diagnostics["levels"], from its ncp_solve info."""
     return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
-                                                 "reason", "edge_retry", "linesearch_retry")})
+                                                 "reason", "edge_retry", "fallback_retry")})

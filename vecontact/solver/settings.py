@@ -40,10 +40,10 @@ class SolverSettings:
 
     # --- Newton iterations and the Krylov tolerances of their steps (policy.py)
     newton_max_it: int = _knob(100, "Newton iterations on the finest grid (numerics.max_iterations wins)", lo=1)
-    fallback_linesearch: str = _knob("bt", "a finest-grid solve not converged in newton_max_it starts again from "
-                                     "its first iterate with this PETSc line search instead of full steps, a "
-                                     "failed search still taking its step (none: never) [RESULTS.md]",
-                                     choices=("bt", "cp", "l2", "none"))
+    fallback: str = _knob("bt", "a finest-grid solve whose full steps did not converge in newton_max_it starts "
+                          "again from its first iterate with this PETSc line search on the full steps, or with "
+                          "PETSc's reduced-space VI Newton and the bt line search (vi); a failed search still "
+                          "takes its step (none: never) [RESULTS.md]", choices=("bt", "cp", "l2", "vi", "none"))
     fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (with the edge term in use: first again without "
                                 "it; 0: never) [RESULTS.md]", lo=0)

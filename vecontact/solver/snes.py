@@ -324,11 +324,11 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
     residual, seconds); the other entries are the second attempt's.  A solve still not converged, or
     whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use: the
-    retry without it), starts again from ``g0`` with the line search SolverSettings.fallback_linesearch
-    instead of full steps (unless the user chose a line search or the VI method; without the term if
-    it was retried), then with full steps from that attempt's last iterate if it stopped short; those
-    two run to ``max_it``.  All count, info["linesearch_retry"] holds the first attempt's, and
-    info["edge_retry"] the full steps' retry if there was one.
+    retry without it), starts again from ``g0`` by SolverSettings.fallback (unless the user chose a
+    line search or the VI method): "vi", PETSc's reduced-space VI Newton (vi.py) to ``max_it``; or a
+    PETSc line search on the full steps (without the term if it was retried), then full steps from that
+    attempt's last iterate if it stopped short, both to ``max_it``.  All count, info["fallback_retry"]
+    holds the full steps' attempt, and info["edge_retry"] their retry if there was one.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -337,34 +337,47 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     if thaw:
         gc.freeze()
     try:
-        ls = settings.fallback_linesearch
+        method = settings.fallback
         opts = dict(options or {})
-        fallback = not (ls == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
-        # the stall rule hands over to the line search: none without it
+        fallback = not (method == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
+        # the stall rule hands over to the fallback: none without it
         g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
                                          replace(settings, fallback_stall=0), options, monitor)
         if info["converged"] or not fallback:
             return g, p, act, info
-        # the line search's attempt and after run to max_it, and without the edge term if it stalled the
-        # full steps (with it the attempt stalled again in 7 of 10 such solves, RESULTS.md)
-        settings = replace(settings, fallback_stall=0, edge_window=0 if info.get("edge_retry") else
-                           settings.edge_window)
         # full steps of the primal-dual active-set method have no convergence guarantee for a
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
-        # again from g0 with a line search on the residual's norm, and every attempt counts
-        # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
-        lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts, snes_linesearch_type=ls)
-        again = _edge_attempts(op, g0, tol, max_it, settings, lsopts, monitor)
-        if not again[3]["converged"]:
-            # the line search can end its solve just short of tol (cp on the SLS rubber: 1.1-5.2e-8 for
-            # 1e-8, RESULTS.md): full steps from its last iterate, which they then converge from
-            again = _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
-        if "edge_retry" in info:        # the later attempts went without the term: the full steps' retry
+        # again from g0, and every attempt counts
+        settings = replace(settings, fallback_stall=0)
+        if method == "vi":
+            # its steps project the gap onto g >= 0; with full steps it wandered in 2 of 5 solves at 256^2,
+            # with bt it converged in all (RESULTS.md, "`fallback`")
+            vi = dict(opts, snes_type="vinewtonrsls", snes_linesearch_type="bt", snes_max_fail=str(int(max_it)))
+            again = _ncp_solve(op, g0, tol, max_it, settings, vi, monitor)
+            again[3].pop("edge_stalled")
+        else:
+            again = _linesearch_attempts(op, g0, tol, max_it, settings if not info.get("edge_retry")
+                                         else replace(settings, edge_window=0), opts, method, monitor)
+        if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
-        return _after(info, again, "linesearch_retry")
+        return _after(info, again, "fallback_retry")
     finally:
         if thaw:
             gc.unfreeze()
+
+
+def _linesearch_attempts(op, g0, tol, max_it, settings, opts, ls, monitor):
+    """The fallback by a line search ``ls`` on the full steps from ``g0`` (ncp_solve), then full steps from
+    its last iterate if it stopped short, both to ``max_it`` (the settings without the edge term when it
+    stalled the full steps: with it the attempt stalled again in 7 of 10 such solves, RESULTS.md)."""
+    # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
+    lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts, snes_linesearch_type=ls)
+    again = _edge_attempts(op, g0, tol, max_it, settings, lsopts, monitor)
+    if again[3]["converged"]:
+        return again
+    # the line search can end its solve just short of tol (cp on the SLS rubber: 1.1-5.2e-8 for 1e-8,
+    # RESULTS.md): full steps from its last iterate, which they then converge from
+    return _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
 
 
 def _edge_attempts(op, g0, tol, max_it, settings, options, monitor):
