@@ -5,8 +5,8 @@ operator.py).  The Jacobian is m (a Python Mat, one FFT pair per product); PETSc
 on the inactive (free) index set I through ``createSubMatrix``, with KSP FGMRES and the Python PC
 "compliance on I with a rigid shift" (mean zero off I).  Slower than the default semismooth method
 (about 1.3x its FFT pairs, benchmarks/RESULTS.md) and kept as an independent second solver of the same
-problem; option defaults in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also the
-fallback of a solve whose full steps cannot converge (snes.ncp_solve, SolverSettings.fallback).  The
+problem; option defaults in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also a
+fallback of a solve whose full steps cannot converge (-vc_fallback vi: snes.ncp_solve).  The
 semismooth VI variant (vinewtonssls) was removed: it did not converge with this preconditioner.
 """
 from __future__ import annotations
