@@ -49,8 +49,8 @@ def test_a_solve_that_full_steps_cannot_converge_starts_again_with_the_vi_method
 
 
 def test_a_line_search_fallback_runs_before_full_steps_from_its_last_iterate(monkeypatch):
-    """fallback bt (the default): the line search's attempt from the first iterate, then, if that one stops short, full
-    steps from its last iterate, both to max_it and without the stall rule."""
+    """fallback bt (the default): the line search's attempt from the first iterate, then, if that one
+    stops short, full steps from its last iterate, both to max_it and without the stall rule."""
     import vecontact.solver.snes as snes
     calls = []
     monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 3))

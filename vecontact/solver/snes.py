@@ -349,15 +349,16 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
         # again from g0, and every attempt counts
         settings = replace(settings, fallback_stall=0)
+        # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
+        lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts,
+                      snes_linesearch_type="bt" if method == "vi" else method)
         if method == "vi":
             # its steps project the gap onto g >= 0; with full steps it wandered in 2 of 5 solves at 256^2,
-            # with bt it converged in all (RESULTS.md, "`fallback`")
-            vi = dict(opts, snes_type="vinewtonrsls", snes_linesearch_type="bt", snes_max_fail=str(int(max_it)))
-            again = _ncp_solve(op, g0, tol, max_it, settings, vi, monitor)
-            again[3].pop("edge_stalled")
+            # with bt it converged in all (RESULTS.md, "`fallback`"); it has no edge term to retry without
+            again = _edge_attempts(op, g0, tol, max_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
         else:
             again = _linesearch_attempts(op, g0, tol, max_it, settings if not info.get("edge_retry")
-                                         else replace(settings, edge_window=0), opts, method, monitor)
+                                         else replace(settings, edge_window=0), opts, lsopts, monitor)
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "fallback_retry")
@@ -366,12 +367,11 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
             gc.unfreeze()
 
 
-def _linesearch_attempts(op, g0, tol, max_it, settings, opts, ls, monitor):
-    """The fallback by a line search ``ls`` on the full steps from ``g0`` (ncp_solve), then full steps from
-    its last iterate if it stopped short, both to ``max_it`` (the settings without the edge term when it
-    stalled the full steps: with it the attempt stalled again in 7 of 10 such solves, RESULTS.md)."""
-    # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
-    lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts, snes_linesearch_type=ls)
+def _linesearch_attempts(op, g0, tol, max_it, settings, opts, lsopts, monitor):
+    """The fallback by a line search on the full steps from ``g0`` (ncp_solve; ``lsopts``: ``opts`` with
+    it), then full steps from its last iterate if it stopped short, both to ``max_it`` (the settings
+    without the edge term when it stalled the full steps: with it the attempt stalled again in 7 of 10
+    such solves, RESULTS.md)."""
     again = _edge_attempts(op, g0, tol, max_it, settings, lsopts, monitor)
     if again[3]["converged"]:
         return again
