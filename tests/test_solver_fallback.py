@@ -15,7 +15,7 @@ def _stand_in(calls, converged_at):
     """A stand-in for one attempt (_ncp_solve) that records its start, options, stall count and edge
     window, and converges at attempt ``converged_at``."""
     def attempt(op, g0, tol, max_it, settings, options, monitor):
-        calls.append((g0, dict(options or {}), settings.fallback_stall, settings.edge_window))
+        calls.append((g0, dict(options or {}), settings.fallback_stall, settings.edge_window, max_it))
         converged = len(calls) == converged_at
         info = dict(iterations=10 * len(calls), linear_iterations=100 * len(calls), residual=1e-9 if converged
                     else 1.0, seconds=1.0, converged=converged, edge_stalled=False)
@@ -26,9 +26,9 @@ def _stand_in(calls, converged_at):
 def test_a_solve_that_full_steps_cannot_converge_starts_again_with_the_vi_method(monkeypatch):
     """ncp_solve's attempts, with a stand-in for one attempt: full steps that end unconverged are
     followed, with fallback vi, by PETSc's reduced-space VI Newton with the bt line search (a failed
-    search still taking its step) from the same first iterate, to max_it and without the stall rule;
-    the info counts both and keeps the full steps' attempt under "fallback_retry". No fallback when
-    the user chose a line search or the VI method, nor with fallback none."""
+    search still taking its step) from the same first iterate, to fallback_max_it and without the
+    stall rule; the info counts both and keeps the full steps' attempt under "fallback_retry". No
+    fallback when the user chose a line search or the VI method, nor with fallback none."""
     import vecontact.solver.snes as snes
     calls = []
     monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 2))
@@ -36,7 +36,8 @@ def test_a_solve_that_full_steps_cannot_converge_starts_again_with_the_vi_method
     s = SolverSettings(fallback="vi")
     g, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {"ksp_type": "fgmres"})
     assert [c[1].get("snes_type") for c in calls] == [None, "vinewtonrsls"]
-    assert calls[1][1]["snes_linesearch_type"] == "bt" and calls[1][1]["snes_max_fail"] == "100"
+    assert calls[1][1]["snes_linesearch_type"] == "bt" and calls[1][1]["snes_max_fail"] == "300"
+    assert [c[4] for c in calls] == [100, s.fallback_max_it] and s.fallback_max_it == 300
     assert calls[0][0] is g0 and calls[1][0] is g0 and all(c[1]["ksp_type"] == "fgmres" for c in calls)
     assert [c[2] for c in calls] == [s.fallback_stall, 0]
     assert info["converged"] and info["iterations"] == 30 and info["linear_iterations"] == 300
@@ -49,8 +50,9 @@ def test_a_solve_that_full_steps_cannot_converge_starts_again_with_the_vi_method
 
 
 def test_a_line_search_fallback_runs_before_full_steps_from_its_last_iterate(monkeypatch):
-    """fallback bt (the default): the line search's attempt from the first iterate, then, if that one
-    stops short, full steps from its last iterate, both to max_it and without the stall rule."""
+    """fallback bt (the default): the line search's attempt from the first iterate to fallback_max_it,
+    then, if that one stops short, full steps from its last iterate to max_it, both without the stall
+    rule."""
     import vecontact.solver.snes as snes
     calls = []
     monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 3))
@@ -60,7 +62,8 @@ def test_a_line_search_fallback_runs_before_full_steps_from_its_last_iterate(mon
     g, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {"ksp_type": "fgmres"})
     assert [c[1].get("snes_linesearch_type") for c in calls] == [None, "bt", None]
     assert calls[0][0] is g0 and calls[1][0] is g0 and np.array_equal(calls[2][0], np.full(2, 2.0))
-    assert calls[1][1]["snes_max_fail"] == "100" and "snes_max_fail" not in calls[2][1]
+    assert calls[1][1]["snes_max_fail"] == "300" and "snes_max_fail" not in calls[2][1]
+    assert [c[4] for c in calls] == [100, 300, 100]
     assert [c[2] for c in calls] == [s.fallback_stall, 0, 0]
     assert [c[3] for c in calls] == [s.edge_window] * 3
     assert info["converged"] and info["iterations"] == 60 and info["linear_iterations"] == 600

@@ -79,8 +79,9 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         settings.coarse_levels of them, coarsest first), each warm-starting the next by trigonometric
         interpolation + settings.smooth_sweeps projected Richardson sweeps (see warmstart.py); the coarse
         grids hold all the roughness of null-band surfaces.  Ignored when N is too small.
-    max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it) or CG
-        iterations (pk, default settings.pk_max_it)
+    max_iterations : Newton iterations (snes, fine grid; default settings.newton_max_it, and
+        settings.fallback_max_it for the fallback's attempt) or CG iterations (pk, default
+        settings.pk_max_it)
     store : which local fields to return ("pressure", "gap", "displacement"); without "displacement" its
         backward transform is skipped (mu needs only its spectrum: half an FFT pair less)
     monitor : optional callable(level_N, iteration, residual) for progress output
@@ -175,6 +176,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         if g0 is None:
             g0 = bearing_guess(op, cfg.bearing_area_min, cfg.bearing_area_max, cfg.bearing_tol)
         maxit = cfg.newton_max_it if max_iterations is None else int(max_iterations)
+        if max_iterations is not None:      # the caller's cap is every attempt's, the fallback's too
+            cfg = replace(cfg, fallback_max_it=maxit)
         mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
         ghat, phat, act, info = ncp_solve(op, g0, tolerance, maxit, cfg, options, monitor=mon)
         levels_info.append(_level_info(fft.N, info))

@@ -44,6 +44,8 @@ class SolverSettings:
                           "again from its first iterate with this PETSc line search on the full steps, or with "
                           "PETSc's reduced-space VI Newton and the bt line search (vi); a failed search still "
                           "takes its step (none: never) [RESULTS.md]", choices=("bt", "cp", "l2", "vi", "none"))
+    fallback_max_it: int = _knob(300, "Newton iterations of the fallback's attempt (numerics.max_iterations "
+                                 "wins): bt's measure falls by a few % an iteration [RESULTS.md]", lo=1)
     fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (with the edge term in use: first again without "
                                 "it; 0: never) [RESULTS.md]", lo=0)

@@ -325,9 +325,10 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     residual, seconds); the other entries are the second attempt's.  A solve still not converged, or
     whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use: the
     retry without it), starts again from ``g0`` by SolverSettings.fallback (unless the user chose a
-    line search or the VI method): "vi", PETSc's reduced-space VI Newton (vi.py) to ``max_it``; or a
-    PETSc line search on the full steps (without the term if it was retried), then full steps from that
-    attempt's last iterate if it stopped short, both to ``max_it``.  All count, info["fallback_retry"]
+    line search or the VI method): "vi", PETSc's reduced-space VI Newton (vi.py); or a PETSc line
+    search on the full steps (without the term if it was retried), then full steps from that attempt's
+    last iterate to ``max_it`` if it stopped short.  The fallback's own attempt runs to
+    SolverSettings.fallback_max_it.  All count, info["fallback_retry"]
     holds the full steps' attempt, and info["edge_retry"] their retry if there was one.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
@@ -349,15 +350,17 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
         # again from g0, and every attempt counts
         settings = replace(settings, fallback_stall=0)
+        # its measure falls slowly but steadily: the 2048^2 sharp rubber's bt needed 126 (RESULTS.md)
+        fb_it = settings.fallback_max_it
         # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
-        lsopts = dict({"snes_max_fail": str(int(max_it))}, **opts,
+        lsopts = dict({"snes_max_fail": str(fb_it)}, **opts,
                       snes_linesearch_type="bt" if method == "vi" else method)
         if method == "vi":
             # its steps project the gap onto g >= 0; with full steps it wandered in 2 of 5 solves at 256^2,
             # with bt it converged in all (RESULTS.md, "`fallback`"); it has no edge term to retry without
-            again = _edge_attempts(op, g0, tol, max_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
+            again = _edge_attempts(op, g0, tol, fb_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
         else:
-            again = _linesearch_attempts(op, g0, tol, max_it, settings if not info.get("edge_retry")
+            again = _linesearch_attempts(op, g0, tol, fb_it, max_it, settings if not info.get("edge_retry")
                                          else replace(settings, edge_window=0), opts, lsopts, monitor)
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
@@ -367,12 +370,12 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
             gc.unfreeze()
 
 
-def _linesearch_attempts(op, g0, tol, max_it, settings, opts, lsopts, monitor):
+def _linesearch_attempts(op, g0, tol, fb_it, max_it, settings, opts, lsopts, monitor):
     """The fallback by a line search on the full steps from ``g0`` (ncp_solve; ``lsopts``: ``opts`` with
-    it), then full steps from its last iterate if it stopped short, both to ``max_it`` (the settings
-    without the edge term when it stalled the full steps: with it the attempt stalled again in 7 of 10
-    such solves, RESULTS.md)."""
-    again = _edge_attempts(op, g0, tol, max_it, settings, lsopts, monitor)
+    it) to ``fb_it``, then full steps from its last iterate if it stopped short, to ``max_it`` (the
+    settings without the edge term when it stalled the full steps: with it the attempt stalled again
+    in 7 of 10 such solves, RESULTS.md)."""
+    again = _edge_attempts(op, g0, tol, fb_it, settings, lsopts, monitor)
     if again[3]["converged"]:
         return again
     # the line search can end its solve just short of tol (cp on the SLS rubber: 1.1-5.2e-8 for 1e-8,
