@@ -470,3 +470,54 @@ def test_carried_map_collective(comm):
     assert comm.allgather((changed2, size2)) == [(changed2, size2)] * comm.size
     mine, ref = two[:, rows.start * N:rows.stop * N], one[:, rows.start * N:rows.stop * N]
     assert np.abs(mine - ref).max() <= 1e-6 * np.abs(one).max()
+
+
+def test_vi_step_sets_its_active_set_on_every_rank(comm):
+    """The VI method's step (vi.ViNewton.stiffness_inverse) resets the contact-set step's active set, a
+    collective call, whenever the inactive set changed on any rank: here it changes on rank 0 only
+    (one point of I joins A), and the step must still match one made afresh for the new set (to 1e-9
+    of max|y|: both at rtol 1e-12), under faulthandler (a hang fails the stage after 120 s).  Calling
+    set_active only where the local set changed hung the VI fallback on 2 ranks (session 81), and
+    hangs this test (tried)."""
+    import faulthandler
+    from mpi4py import MPI
+    from vecontact.solver.contactset import ContactSetStep
+    from vecontact.solver.newton import NewtonState
+    from vecontact.solver.operator import ContactOperator
+    from vecontact.solver.settings import SolverSettings
+    from vecontact.solver.snes import petsc
+    from vecontact.solver.vi import ViNewton
+    PETSc = petsc()
+    N = 32
+    fft = make_fft(comm, N)
+    h = random_surface(N, L_PAPER, small_spectrum(N), seed=N)
+    rows = slice(fft.row_start, fft.row_start + fft.local_real_shape[0])
+    op = ContactOperator(fft, L_PAPER, hn(), 1.0, 1e4, h[rows])
+    settings = SolverSettings(edge_window=0, vi_step_rtol=1e-12)
+    free = (h <= np.quantile(h, 0.9))[rows]
+    idx0 = np.flatnonzero(free.ravel())
+    idx1 = idx0[1:] if comm.rank == 0 else idx0
+
+    def step_of(vi, idx):
+        x = PETSc.Vec().createMPI((idx.size, PETSc.DECIDE), comm=comm)
+        y = x.duplicate()
+        x.getArray()[:] = np.cos(idx)          # the same values on any split of the rows
+        assert vi.stiffness_inverse(idx, x, y)
+        out = y.getArray(readonly=True).copy()
+        x.destroy()
+        y.destroy()
+        return out
+
+    vis = [ViNewton(NewtonState(op), PETSc, ContactSetStep(op, op.kappa, PETSc, f"vimpi{k}_", settings))
+           for k in range(2)]
+    faulthandler.dump_traceback_later(120, exit=True)
+    try:
+        step_of(vis[0], idx0)
+        changed_here = step_of(vis[0], idx1)
+        fresh = step_of(vis[1], idx1)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+        for vi in vis:
+            vi.release()
+    scale = comm.allreduce(float(np.max(np.abs(fresh))), op=MPI.MAX)
+    assert comm.allreduce(float(np.max(np.abs(changed_here - fresh))), op=MPI.MAX) <= 1e-9 * scale

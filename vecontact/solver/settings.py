@@ -40,10 +40,13 @@ class SolverSettings:
 
     # --- Newton iterations and the Krylov tolerances of their steps (policy.py)
     newton_max_it: int = _knob(100, "Newton iterations on the finest grid (numerics.max_iterations wins)", lo=1)
-    fallback: str = _knob("bt", "a finest-grid solve whose full steps did not converge in newton_max_it starts "
-                          "again from its first iterate with this PETSc line search on the full steps, or with "
-                          "PETSc's reduced-space VI Newton and the bt line search (vi); a failed search still "
-                          "takes its step (none: never) [RESULTS.md]", choices=("bt", "cp", "l2", "vi", "none"))
+    fallback: str = _knob("vi", "a finest-grid solve whose full steps did not converge in newton_max_it starts "
+                          "again from its first iterate with PETSc's reduced-space VI Newton and the bt line "
+                          "search (vi), or with this PETSc line search on the full steps; a failed search still "
+                          "takes its step (none: never) [RESULTS.md]", choices=("vi", "bt", "cp", "l2", "none"))
+    vi_step_rtol: float = _knob(1e-5, "Krylov rtol of the VI method's steps, solved on its active set like a "
+                                "contact-set step (vi.py); looser ones need not descend [RESULTS.md]",
+                                lo=0, hi=1, lo_open=True)
     fallback_max_it: int = _knob(300, "Newton iterations of the fallback's attempt (numerics.max_iterations "
                                  "wins): bt's measure falls by a few % an iteration [RESULTS.md]", lo=1)
     fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
@@ -352,8 +355,7 @@ PETSC_DEFAULTS = {
 }
 # -snes_type vinewtonrsls (vi.py): the reduced-space VI Newton method [RESULTS.md]
 PETSC_VI_DEFAULTS = {
-    "ksp_type": "fgmres",
-    "ksp_rtol": "1e-3",
+    "ksp_type": "preonly",                    # the PC solves the step (vi.py, SolverSettings.vi_step_rtol)
     "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (docs/conventions.md §7)
     "snes_linesearch_type": "basic",
 }

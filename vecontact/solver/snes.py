@@ -422,7 +422,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
     ntot = fft.N * fft.N
     vi = _is_vi(options)
     defaults = dict(PETSC_DEFAULTS)
-    if vi:   # the VI method's KSP works on whole-grid vectors (FGMRES: 2 a Krylov iteration)
+    if vi:   # a user's -ksp_type runs on the reduced whole-grid vectors (FGMRES: 2 a Krylov iteration)
         restart = comm.allreduce(settings.restart(nloc, vectors=2), op=MPI.MIN)
         defaults.update(PETSC_VI_DEFAULTS, ksp_max_it=str(settings.ksp_max_it), ksp_gmres_restart=str(restart))
     hold_comm(comm)
@@ -431,7 +431,9 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
     state = NewtonState(op)
     if vi:
         policy = None
-        form = ViNewton(state, PETSc)
+        # its steps on the contact set, without the edge term: with it they stalled (RESULTS.md)
+        form = ViNewton(state, PETSc, ContactSetStep(op, state.kappa, PETSc, prefix, replace(settings, edge_window=0),
+                                                      Workspace(fft)))
     else:
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF),

@@ -2,12 +2,19 @@
 
 The NCP is handed to PETSc as bounds g^ >= 0 with the residual p^(g^) = 1 + m (g^ + h^) (nondimensional,
 operator.py).  The Jacobian is m (a Python Mat, one FFT pair per product); PETSc solves each Newton step
-on the inactive (free) index set I through ``createSubMatrix``, with KSP FGMRES and the Python PC
-"compliance on I with a rigid shift" (mean zero off I).  Slower than the default semismooth method
-(about 1.3x its FFT pairs, benchmarks/RESULTS.md) and kept as an independent second solver of the same
-problem; option defaults in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also a
-fallback of a solve whose full steps cannot converge (-vc_fallback vi: snes.ncp_solve).  The
-semismooth VI variant (vinewtonssls) was removed: it did not converge with this preconditioner.
+m_II y = r on the inactive (free) index set I through ``createSubMatrix``, the gap held on the active
+set A (the rest).  That is the Newton system of the default method's contact-set step (contactset.py)
+on A, so the Python PC solves it there: KSP ``preonly``, the PC's inner FGMRES on A (options prefix
+``contact_``) to SolverSettings.vi_step_rtol (1e-5) and ksp_max_it, without the edge term (with it the
+steps of the sharp and SLS rubbers stalled).  A looser step leaves a gap error on A whose pressure on I (m_IA) can make the step
+no descent for the line search (RESULTS.md, "the VI method's steps on the contact set").  With A empty
+the PC is the compliance c (m's inverse on the whole grid).  A user's ``-ksp_type`` (say ``fgmres``)
+runs on I with this PC.  As a whole solve it took about 1.3x the default semismooth method's FFT
+pairs (before its steps moved to A; not measured since); it is kept as an independent second solver
+of the same problem; option defaults in settings.PETSC_VI_DEFAULTS.  With
+the bt line search it is also a fallback of a solve whose full steps cannot converge (-vc_fallback
+vi: snes.ncp_solve).  The semismooth VI variant (vinewtonssls) was removed: it did not converge with
+the compliance preconditioner.
 """
 from __future__ import annotations
 
@@ -23,10 +30,14 @@ class ViNewton:
     """SNES callbacks, Jacobian (Python Mat context) and set-up of the VI formulation on ``state``
     (a NewtonState)."""
 
-    def __init__(self, state, PETSc):
+    def __init__(self, state, PETSc, step):
         self.state = state
         self.PETSc = PETSc
         self.grid = Grid(state.fft)          # scatter / gather buffers of the sub-matrix products
+        self.step = step                     # ContactSetStep: m_II^-1 through the active set
+        self.rtol = step.settings.vi_step_rtol   # the step's inner rtol
+        self._idx = None                     # the inactive set the step was last set to
+        self._vecs = None                    # whole-grid right-hand side and update of the step
 
     def configure(self, snes, X):
         """Python PC and the bounds 0 <= g^ < inf."""
@@ -38,14 +49,48 @@ class ViNewton:
         snes.setVariableBounds(lo, hi)
 
     def linear_iterations(self, snes):
-        return snes.getLinearSolveIterations()
+        """The step's Krylov iterations, and the outer KSP's unless it is ``preonly`` (one a step)."""
+        outer = 0 if snes.getKSP().getType() == "preonly" else snes.getLinearSolveIterations()
+        return outer + self.step.iterations
 
     def diagnostics(self, linear_iterations):
         """No active set of ours and one kind of step: nothing but the linear iterations."""
         return dict(nchg=[], lin_history=[linear_iterations], modes=[])
 
     def release(self):
-        pass
+        self.step.release()
+        for v in self._vecs or ():
+            v.destroy()
+        self._vecs = self.step = None
+
+    def stiffness_inverse(self, idx, x, y):
+        """y = (m_II)^-1 x on the inactive set I (local flat ``idx``), the gap held on A (the rest): the
+        contact-set step (contactset.py) of the Newton system x_A = 0, (m x)_I = kappa r_I with
+        r_I = x / kappa, to ``rtol`` (SolverSettings.vi_step_rtol) and ksp_max_it.  False (nothing
+        done) when A is empty on every rank.  Collective."""
+        fft = self.state.fft
+        act = np.ones(fft.local_real_shape, dtype=bool)
+        act.reshape(-1)[idx] = False
+        n_act = fft.comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
+        if n_act == 0:
+            return False
+        if self._vecs is None:
+            nloc = int(np.prod(fft.local_real_shape))
+            r = self.PETSc.Vec().createMPI((nloc, fft.N * fft.N), comm=fft.comm)
+            self._vecs = (r, r.duplicate())
+        r, out = self._vecs
+        step = self.step
+        changed = self._idx is None or not np.array_equal(self._idx, idx)
+        if fft.comm.allreduce(changed, op=MPI.LOR):       # set_active is collective
+            step.set_active(act, n_act)
+            self._idx = idx.copy()
+        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it)
+        ra = r.getArray()
+        ra[:] = 0.0
+        ra[idx] = x.getArray(readonly=True) / self.state.kappa
+        step.apply(None, r, out)
+        gather(out.getArray(readonly=True), idx, y.getArray())
+        return True
 
     # ------------------------------------------------------------------ SNES callbacks
     def residual(self, snes, X, F):
@@ -100,8 +145,9 @@ class _SubMat:
 
 
 class _ViPrecond:
-    """The compliance on the inactive set I with a rigid shift (mean zero off I); c r on the whole grid
-    when PETSc hands over the full Jacobian (no bound active)."""
+    """m_II^-1 through the contact-set step (ViNewton.stiffness_inverse); the compliance on I with a
+    rigid shift (mean zero off I) where no point is active; c r on the whole grid when PETSc hands over
+    the full Jacobian (no bound active)."""
 
     def __init__(self, vi):
         self.vi = vi
@@ -115,6 +161,7 @@ class _ViPrecond:
         A, _ = pc.getOperators()
         ctx = A.getPythonContext() if A.getType() == "python" else None
         if isinstance(ctx, _SubMat):
-            vi.on_index_set(ctx.idx, x, st.op.c, y, shift_off=True)
+            if not vi.stiffness_inverse(ctx.idx, x, y):
+                vi.on_index_set(ctx.idx, x, st.op.c, y, shift_off=True)
         else:
             st.fft.apply(st.view(x), st.op.c, st.view(y, readonly=False))
