@@ -6,22 +6,22 @@ m_II y = r on the inactive (free) index set I through ``createSubMatrix``, the g
 set A (the rest).  That is the Newton system of the default method's contact-set step (contactset.py)
 on A, so the Python PC solves it there: KSP ``preonly``, the PC's inner FGMRES on A (options prefix
 ``contact_``) to SolverSettings.vi_step_rtol (1e-5) and ksp_max_it, without the edge term (with it the
-steps of the sharp and SLS rubbers stalled).  A looser step leaves a gap error on A whose pressure on I (m_IA) can make the step
-no descent for the line search (RESULTS.md, "the VI method's steps on the contact set").  With A empty
-the PC is the compliance c (m's inverse on the whole grid).  A user's ``-ksp_type`` (say ``fgmres``)
-runs on I with this PC.  As a whole solve it took about 1.3x the default semismooth method's FFT
-pairs (before its steps moved to A; not measured since); it is kept as an independent second solver
-of the same problem; option defaults in settings.PETSC_VI_DEFAULTS.  With
-the bt line search it is also a fallback of a solve whose full steps cannot converge (-vc_fallback
-vi: snes.ncp_solve).  The semismooth VI variant (vinewtonssls) was removed: it did not converge with
-the compliance preconditioner.
+steps of the sharp and SLS rubbers stalled).  A looser step leaves a gap error on A whose pressure on
+I (m_IA) can make the step no descent for the line search (RESULTS.md, "the VI method's steps on the
+contact set").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
+``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve it took about 1.3x the
+default semismooth method's FFT pairs (before its steps moved to A; not measured since); it is kept
+as an independent second solver of the same problem; option defaults in settings.PETSC_VI_DEFAULTS.
+With the bt line search it is also a fallback of a solve whose full steps cannot converge
+(-vc_fallback vi: snes.ncp_solve).  The semismooth VI variant (vinewtonssls) was removed: it did not
+converge with the compliance preconditioner.
 """
 from __future__ import annotations
 
 import numpy as np
 from mpi4py import MPI
 
-from vecontact.solver.subset import Grid, gather
+from vecontact.solver.subset import gather
 
 __all__ = ["ViNewton"]
 
@@ -33,9 +33,8 @@ class ViNewton:
     def __init__(self, state, PETSc, step):
         self.state = state
         self.PETSc = PETSc
-        self.grid = Grid(state.fft)          # scatter / gather buffers of the sub-matrix products
         self.step = step                     # ContactSetStep: m_II^-1 through the active set
-        self.rtol = step.settings.vi_step_rtol   # the step's inner rtol
+        self.grid = step.grid                # the sub-matrix products' buffers: the step's (subset.Workspace)
         self._idx = None                     # the inactive set the step was last set to
         self._vecs = None                    # whole-grid right-hand side and update of the step
 
@@ -66,8 +65,8 @@ class ViNewton:
     def stiffness_inverse(self, idx, x, y):
         """y = (m_II)^-1 x on the inactive set I (local flat ``idx``), the gap held on A (the rest): the
         contact-set step (contactset.py) of the Newton system x_A = 0, (m x)_I = kappa r_I with
-        r_I = x / kappa, to ``rtol`` (SolverSettings.vi_step_rtol) and ksp_max_it.  False (nothing
-        done) when A is empty on every rank.  Collective."""
+        r_I = x / kappa, to SolverSettings.vi_step_rtol and ksp_max_it.  False (nothing done) when A
+        is empty on every rank.  Collective."""
         fft = self.state.fft
         act = np.ones(fft.local_real_shape, dtype=bool)
         act.reshape(-1)[idx] = False
@@ -84,7 +83,7 @@ class ViNewton:
         if fft.comm.allreduce(changed, op=MPI.LOR):       # set_active is collective
             step.set_active(act, n_act)
             self._idx = idx.copy()
-        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it)
+        step.set_tolerances(step.settings.vi_step_rtol, 0.0, step.settings.ksp_max_it)
         ra = r.getArray()
         ra[:] = 0.0
         ra[idx] = x.getArray(readonly=True) / self.state.kappa
