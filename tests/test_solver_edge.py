@@ -224,9 +224,10 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     measured: 400, 400, 400 at its seventh to ninth steps). After edge_capped_max such steps in a row,
     long before edge_newton_max, that grid starts again without the term, and so does the finer one:
     from there on the solve is bit for bit the one without the term from the start, plus the first
-    attempt's pairs. With the rule off, the coarse grid runs on to coarse_max_it and the fine one
-    stalls too (ended by edge_newton_max or fallback_stall; which comes first depends on the FFTs'
-    rounding: 25 alone, 24 within the whole suite, measured)."""
+    attempt's pairs. With the rule off (and fallback_coarse, which would hand that grid and the finer
+    one to the fallback), the coarse grid runs on to coarse_max_it and the fine one stalls too (ended
+    by edge_newton_max or fallback_stall; which comes first depends on the FFTs' rounding: 25 alone,
+    24 within the whole suite, measured)."""
     from vecontact.solver import solve_contact
     n = 128
     h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
@@ -244,7 +245,7 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     assert r.fft_pairs_by_level[n] == plain.fft_pairs_by_level[n]
     assert r.fft_pairs_by_level[64] > plain.fft_pairs_by_level[64]
     off = solve_contact(fft, L_PAPER, h, mod, 0.01, 3e4, tolerance=1e-8, store=(),
-                        petsc_options=["-vc_edge_capped_max 0"])
+                        petsc_options=["-vc_edge_capped_max 0", "-vc_fallback_coarse off"])
     assert off.diagnostics["levels"][0]["iterations"] == s.coarse_max_it
     # the fine grid stalls too, and starts again without the term by the count or, sooner, by fallback_stall
     assert s.fallback_stall < off.diagnostics["edge_retry"]["iterations"] <= s.edge_newton_max

@@ -94,6 +94,95 @@ def test_the_line_search_goes_without_the_edge_term_when_it_stalled_the_full_ste
     assert len(windows) == 2 and info["edge_retry"]["iterations"] == 8 and info["iterations"] == 10
 
 
+def test_a_direct_solve_starts_with_the_fallback_s_attempt(monkeypatch):
+    """ncp_solve(direct=True), as contact.py calls it on the grids finer than one that needed the
+    fallback: no full steps; the fallback's attempt (vi, or bt then full steps if it stops short) runs
+    from g0 to fallback_max_it without the stall rule, and info says so (fallback_direct, no
+    fallback_retry).  With no fallback (fallback none, a user's line search or VI method) direct is
+    ignored: the full steps as usual."""
+    import vecontact.solver.snes as snes
+    calls = []
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 1))
+    g0 = np.zeros(2)
+    s = SolverSettings()
+    _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {}, direct=True)
+    assert [c[1].get("snes_type") for c in calls] == ["vinewtonrsls"] and calls[0][0] is g0
+    assert calls[0][1]["snes_linesearch_type"] == "bt" and [c[4] for c in calls] == [s.fallback_max_it]
+    assert calls[0][2] == 0 and info["fallback_direct"] and "fallback_retry" not in info
+    assert info["converged"] and info["iterations"] == 10
+    calls.clear()
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 2))
+    _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, SolverSettings(fallback="bt"), {}, direct=True)
+    assert [c[1].get("snes_linesearch_type") for c in calls] == ["bt", None] and [c[4] for c in calls] == [300, 100]
+    assert info["converged"] and info["fallback_direct"] and info["iterations"] == 30
+    for settings, options in ((SolverSettings(fallback="none"), {}), (s, {"snes_linesearch_type": "bt"}),
+                              (s, {"snes_type": "vinewtonrsls"})):
+        calls.clear()
+        monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 1))
+        _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, settings, options, direct=True)
+        assert len(calls) == 1 and calls[0][1] == options and "fallback_direct" not in info
+
+
+def test_full_steps_that_end_near_their_tolerance_take_no_fallback_when_asked(monkeypatch):
+    """ncp_solve(fallback_above=x), as contact.py calls it on the coarse grids (fallback_coarse_measure):
+    full steps that end unconverged at a measure of at most x end the solve; above x the fallback
+    follows."""
+    import vecontact.solver.snes as snes
+    calls = []
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 2))    # the full steps end at 1.0
+    _, _, _, info = snes.ncp_solve(None, np.zeros(2), 1e-8, 50, SolverSettings(), {}, fallback_above=1.0)
+    assert len(calls) == 1 and not info["converged"] and "fallback_retry" not in info
+    calls.clear()
+    _, _, _, info = snes.ncp_solve(None, np.zeros(2), 1e-8, 50, SolverSettings(), {}, fallback_above=0.99)
+    assert len(calls) == 2 and info["converged"] and info["fallback_retry"]["residual"] == 1.0
+
+
+@pytest.mark.parametrize("switch", ["on", "off"])
+def test_after_a_coarse_grid_that_needed_the_fallback_the_finer_grids_start_with_it(monkeypatch, switch):
+    """solve_contact's grid chain, with a stand-in for ncp_solve that fails the full steps of the
+    second of three grids (64^2, 128^2, 256^2): with fallback_coarse on, that grid takes the
+    fallback (to coarse_max_it, without the stall rule, if its measure ended above
+    fallback_coarse_measure) and every finer grid is solved with
+    direct=True; the first grid, solved before, is not.  With it off, no coarse grid takes the fallback
+    and none is direct."""
+    import vecontact.solver.contact as contact
+    import vecontact.solver.snes as snes
+    from vecontact.solver import solve_contact
+    seen = []
+
+    def stand_in(op, g0, tol, max_it, settings, options=None, monitor=None, direct=False, fallback_above=0.0):
+        n = op.fft.N
+        fb = settings.fallback != "none" and not direct and n == 128
+        seen.append((n, direct, settings.fallback, settings.fallback_stall, settings.fallback_max_it, max_it,
+                     fallback_above))
+        info = dict(iterations=3, linear_iterations=9, residual=1e-12, seconds=0.0, converged=True,
+                    reason=2, history=[], nchg=[], lin_history=[], modes=[], measures=(0.0, 0.0, 0.0))
+        if fb:
+            info["fallback_retry"] = dict(iterations=50, linear_iterations=500, residual=1.0, seconds=0.0)
+        if direct:
+            info["fallback_direct"] = True
+        g = np.ones(op.fft.local_real_shape)
+        return g, np.zeros_like(g), np.zeros(g.shape, bool), info
+
+    monkeypatch.setattr(snes, "ncp_solve", stand_in)
+    n = 256
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    from vecontact.physics.modulus import SLS
+    r = solve_contact(fft, L_PAPER, h, SLS(3e6, 3e8, 1e-5, NU), 0.001, 1e4, store=(),
+                      petsc_options=["-vc_fallback_coarse", switch])
+    s = SolverSettings()
+    coarse_fb = s.fallback if switch == "on" else "none"
+    assert [x[0] for x in seen] == [64, 128, 256]
+    assert [x[1] for x in seen] == ([False, False, True] if switch == "on" else [False, False, False])
+    assert seen[0][2:] == seen[1][2:] == (coarse_fb, 0, s.coarse_max_it, s.coarse_max_it, s.fallback_coarse_measure)
+    assert seen[2][2:] == (s.fallback, s.fallback_stall, s.fallback_max_it, s.newton_max_it, 0.0)
+    levels = r.diagnostics["levels"]
+    assert [lv["fallback_direct"] for lv in levels] == [False, False, switch == "on"]
+    assert r.diagnostics["fallback_direct"] == (switch == "on")
+    assert (levels[1]["fallback_retry"] is not None) == (switch == "on")
+
+
 def test_the_stall_count_runs_from_the_lowest_measure_after_the_start():
     """_Convergence._measure_stalled: true once fallback_stall Newton iterations have passed since the
     lowest measure after the start (ties are no new lowest; the start's own measure does not count);
@@ -127,3 +216,30 @@ def test_the_sls_rubber_at_one_mm_per_second_converges_with_the_fallback(fallbac
     assert first is not None and first["residual"] > 1.0 and r.iterations > first["iterations"]
     assert first["iterations"] < SolverSettings().newton_max_it     # the stall, not the iteration cap
     assert_contact_solution(r, fields, h, sigma0)
+
+
+def test_a_coarse_grid_that_needs_the_fallback_hands_it_to_the_finer_grid():
+    """The SLS rubber at 1 mm/s on the paper's 256^2 surface, sigma0 = 1e-4 |E(8 q0 v)| (0.24 % in
+    contact): the full steps cannot solve the 128^2 coarse grid (50 Newton iterations, measured), nor
+    the 256^2 one (the stall rule hands it to the fallback after 46).  With fallback_coarse on, the
+    128^2 grid takes the fallback and the 256^2 grid starts with it: the same contact set and mu as
+    with it off, in far fewer FFT pairs (measured on one rank: 1394 against 13 788, 6 Newton
+    iterations on 256^2 against 54)."""
+    from reference.cases import Q0, paper_case
+    from vecontact.physics.modulus import SLS
+    from vecontact.solver import solve_contact
+    fft, h, _ = paper_case(256)
+    mod = SLS(3e6, 3e8, 1e-5, NU)
+    sigma0 = 1e-4 * abs(complex(mod(np.array([8 * Q0 * 0.001]))[0]))
+    on, off = (solve_contact(fft, L_PAPER, h, mod, 0.001, sigma0, store=(),
+                             petsc_options=["-vc_fallback_coarse", sw]) for sw in ("on", "off"))
+    assert on.converged and off.converged
+    lv_on, lv_off = on.diagnostics["levels"], off.diagnostics["levels"]
+    assert [lv["N"] for lv in lv_on] == [64, 128, 256]
+    assert lv_on[1]["fallback_retry"] is not None and lv_on[2]["fallback_direct"]
+    assert lv_on[2]["fallback_retry"] is None and on.diagnostics["fallback_direct"]
+    assert lv_off[1]["fallback_retry"] is None and not lv_off[1]["converged"]
+    assert lv_off[2]["fallback_retry"] is not None and not lv_off[2]["fallback_direct"]
+    assert abs(on.area - off.area) * 256 ** 2 <= 1
+    assert abs(on.mu - off.mu) <= 1e-8 * abs(off.mu)
+    assert on.fft_pairs < off.fft_pairs / 3, (on.fft_pairs, off.fft_pairs)

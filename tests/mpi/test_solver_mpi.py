@@ -183,6 +183,27 @@ def test_fallback_collective(comm, fallback):
     assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0
 
 
+def test_coarse_fallback_collective(comm):
+    """A coarse grid whose full steps fail takes the fallback, and the finer grid starts with it
+    (fallback_coarse; tests/test_solver_fallback.py): the SLS rubber at 1 mm/s on the paper's 256^2
+    surface, 0.24 % in contact, on 2 ranks guarded by faulthandler and on 1. Both decide alike on
+    every rank: 128^2 takes the fallback, 256^2 starts with it; the same contact set, the pressure
+    to 1e-6 of sigma0, each a contact solution on its fields."""
+    from reference.cases import paper_case
+    from vecontact.physics.modulus import SLS
+    _, h, _ = paper_case(256)
+    mod = SLS(3e6, 3e8, 1e-5, NU)
+    sigma0 = 1e-4 * abs(complex(mod(np.array([8 * Q0 * 0.001]))[0]))
+    (two, f2), (one, f1) = on_all_ranks_and_one(comm, h, mod, 0.001, sigma0)
+    for r, f in ((two, f2), (one, f1)):
+        levels = r.diagnostics["levels"]
+        assert r.converged and [lv["N"] for lv in levels] == [64, 128, 256]
+        assert levels[1]["fallback_retry"] is not None and levels[2]["fallback_direct"]
+        assert_contact_solution(r, f, h, sigma0)
+    assert two.area == one.area
+    assert np.abs(f2["pressure"] - f1["pressure"]).max() <= 1e-6 * sigma0
+
+
 @pytest.mark.slow
 def test_mu_vs_mu_geometric_paper_512_collective(comm):
     """Paper's smallest case (q1 = 32 q0, N = 512, null band 8) on 2 ranks: mu_geometric = mu within 2%."""

@@ -130,16 +130,20 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
     else:
         from vecontact.solver.snes import ncp_solve
         g0 = None
+        direct = False          # a coarse grid needed the fallback: the finer ones start with it
         lv = coarse_levels(fft.N, comm.size, min_n=cfg.coarse_min_n, max_levels=cfg.coarse_levels) if coarse else []
         if wst is not None and not lv:
             g0 = wst["gap"] / op.ell
         elif lv:
             prev = None
             # the coarse grids' steps unsmoothed: smoothing them changed the pairs by -3 .. +4 % (RESULTS.md).
-            # No retry after edge_newton_max iterations there, nor with a line search: a coarse solve ends
-            # at coarse_max_it anyway, and the study's coarse grids wander up to 49 iterations without a
-            # stall (RESULTS.md)
-            coarse_cfg = replace(cfg, step_sweeps=0, edge_newton_max=0, fallback="none")
+            # No retry after edge_newton_max iterations there, nor the stall rule: a coarse solve ends at
+            # coarse_max_it anyway, and the study's coarse grids wander up to 49 iterations without a
+            # stall (RESULTS.md).  One that ends unconverged, far from its tolerance, takes the fallback
+            # (fallback_coarse), to coarse_max_it too: the study's have ended at measures up to 0.17
+            coarse_cfg = replace(cfg, step_sweeps=0, edge_newton_max=0, fallback_stall=0,
+                                 fallback_max_it=cfg.coarse_max_it,
+                                 fallback=cfg.fallback if cfg.fallback_coarse == "on" else "none")
             for n in lv:
                 fc = coarse_fft(fft, n)
                 touch(fc)
@@ -157,8 +161,12 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                                      cfg.smooth_ratio)
                 mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
                 gh, ph, _, inf = ncp_solve(opc, gc0, max(cfg.coarse_tol, tolerance), cfg.coarse_max_it,
-                                           coarse_cfg, options, monitor=mon)
+                                           coarse_cfg, options, monitor=mon, direct=direct,
+                                           fallback_above=cfg.fallback_coarse_measure)
                 levels_info.append(_level_info(n, inf))
+                # full steps that could not solve a coarse grid wandered on the finer ones too: the finest
+                # grid took 1.4-24x the pairs of the fallback's attempt alone (RESULTS.md, "fallback_coarse")
+                direct = direct or "fallback_retry" in inf
                 if inf.get("edge_retry"):
                     # the term stalled this grid's steps: the finer grids go without it, so that a stall
                     # costs one stalled attempt, not one on every grid (RESULTS.md, "Stalls caught early")
@@ -179,7 +187,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         if max_iterations is not None:      # the caller's cap is every attempt's, the fallback's too
             cfg = replace(cfg, fallback_max_it=maxit)
         mon = None if monitor is None else (lambda it, r, m: monitor(fft.N, it, r))
-        ghat, phat, act, info = ncp_solve(op, g0, tolerance, maxit, cfg, options, monitor=mon)
+        ghat, phat, act, info = ncp_solve(op, g0, tolerance, maxit, cfg, options, monitor=mon, direct=direct)
         levels_info.append(_level_info(fft.N, info))
 
     # returned fields (SI): zero pressure off contact, zero gap in contact
@@ -217,7 +225,8 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          carried_directions=int(info.get("carried_directions", 0)),
                          stalls=int(info.get("stalls", 0)),
                          smoothed_steps=int(info.get("smoothed_steps", 0)),
-                         edge_retry=info.get("edge_retry"), fallback_retry=info.get("fallback_retry")),
+                         edge_retry=info.get("edge_retry"), fallback_retry=info.get("fallback_retry"),
+                         fallback_direct=bool(info.get("fallback_direct", False))),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
@@ -230,4 +239,5 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
 def _level_info(n, info):
     """One grid level's entry of diagnostics["levels"], from its ncp_solve info."""
     return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
-                                                 "reason", "edge_retry", "fallback_retry")})
+                                                 "reason", "edge_retry", "fallback_retry")},
+                fallback_direct=bool(info.get("fallback_direct", False)))

@@ -49,6 +49,12 @@ class SolverSettings:
                                 lo=0, hi=1, lo_open=True)
     fallback_max_it: int = _knob(300, "Newton iterations of the fallback's attempt (numerics.max_iterations "
                                  "wins): bt's measure falls by a few % an iteration [RESULTS.md]", lo=1)
+    fallback_coarse: str = _knob("on", "on: a coarse grid whose full steps end unconverged at coarse_max_it "
+                                 "is solved again by the fallback (to coarse_max_it), and the finer grids, the "
+                                 "finest too, start with the fallback's attempt [RESULTS.md]", choices=("on", "off"))
+    fallback_coarse_measure: float = _knob(1.0, "... only if its measure ended above this (the study's coarse "
+                                           "grids have ended unconverged at up to 0.17, the hard rubbers' at "
+                                           "5.8-9.5e3) [RESULTS.md]", lo=0)
     fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (with the edge term in use: first again without "
                                 "it; 0: never) [RESULTS.md]", lo=0)

@@ -311,7 +311,7 @@ def _remove_options(PETSc, keys):
 _COUNTER = [0]
 
 
-def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
+def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=False, fallback_above=0.0):
     """Solve the NCP of ``op`` (ContactOperator) from the nondimensional gap ``g0``.
 
     ``settings``: SolverSettings; ``options``: PETSc's entries of a parsed options dict (options.py),
@@ -329,7 +329,11 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
     search on the full steps (without the term if it was retried), then full steps from that attempt's
     last iterate to ``max_it`` if it stopped short.  The fallback's own attempt runs to
     SolverSettings.fallback_max_it.  All count, info["fallback_retry"]
-    holds the full steps' attempt, and info["edge_retry"] their retry if there was one.
+    holds the full steps' attempt, and info["edge_retry"] their retry if there was one.  With
+    ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
+    full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
+    full steps whose last measure is at most ``fallback_above`` (a coarse grid that nearly converged)
+    take no fallback.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -341,11 +345,13 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
         method = settings.fallback
         opts = dict(options or {})
         fallback = not (method == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
-        # the stall rule hands over to the fallback: none without it
-        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
-                                         replace(settings, fallback_stall=0), options, monitor)
-        if info["converged"] or not fallback:
-            return g, p, act, info
+        info = None
+        if not (direct and fallback):
+            # the stall rule hands over to the fallback: none without it
+            g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
+                                             replace(settings, fallback_stall=0), options, monitor)
+            if info["converged"] or not fallback or info["residual"] <= fallback_above:
+                return g, p, act, info
         # full steps of the primal-dual active-set method have no convergence guarantee for a
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
         # again from g0, and every attempt counts
@@ -360,8 +366,11 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None):
             # with bt it converged in all (RESULTS.md, "`fallback`"); it has no edge term to retry without
             again = _edge_attempts(op, g0, tol, fb_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
         else:
-            again = _linesearch_attempts(op, g0, tol, fb_it, max_it, settings if not info.get("edge_retry")
+            again = _linesearch_attempts(op, g0, tol, fb_it, max_it, settings if not (info or {}).get("edge_retry")
                                          else replace(settings, edge_window=0), opts, lsopts, monitor)
+        if info is None:
+            again[3]["fallback_direct"] = True
+            return again
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "fallback_retry")

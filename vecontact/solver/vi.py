@@ -9,11 +9,12 @@ on A, so the Python PC solves it there: KSP ``preonly``, the PC's inner FGMRES o
 steps of the sharp and SLS rubbers stalled).  A looser step leaves a gap error on A whose pressure on
 I (m_IA) can make the step no descent for the line search (RESULTS.md, "the VI method's steps on the
 contact set").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
-``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve it took about 1.3x the
-default semismooth method's FFT pairs (before its steps moved to A; not measured since); it is kept
-as an independent second solver of the same problem; option defaults in settings.PETSC_VI_DEFAULTS.
-With the bt line search it is also a fallback of a solve whose full steps cannot converge
-(-vc_fallback vi: snes.ncp_solve).  The semismooth VI variant (vinewtonssls) was removed: it did not
+``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
+2x the default's FFT pairs on the paper's rubber but 0.04-0.73x them where the default's full steps
+fail (RESULTS.md); it is kept as an independent second solver of the same problem; option defaults
+in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also the fallback of a solve whose full
+steps cannot converge, and of the grids finer than one whose full steps failed (-vc_fallback vi,
+-vc_fallback_coarse: snes.ncp_solve, contact.py).  The semismooth VI variant (vinewtonssls) was removed: it did not
 converge with the compliance preconditioner.
 """
 from __future__ import annotations
