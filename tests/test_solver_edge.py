@@ -194,7 +194,7 @@ def test_a_stalled_solve_starts_again_without_the_edge_term():
     """A rubber with a sharp glass transition (Havriliak-Negami alpha = beta = 0.8, loss angle up to 68
     deg) at 1 mm/s on a 64^2 grid, 36 % in contact: with the edge term the contact-set steps stall (no
     convergence in 100 Newton iterations, measured), so after edge_newton_max iterations, or sooner once
-    fallback_stall pass without a new lowest measure (22 here, measured), the solve
+    edge_stall pass without a new lowest measure (22 here, measured), the solve
     starts again from its first iterate without the term, converges, reports the first attempt in
     diagnostics["edge_retry"] and counts both attempts; its contact area is that of a solve without the
     term from the start (one grid point), and a solve that converges in time is never retried."""
@@ -210,7 +210,7 @@ def test_a_stalled_solve_starts_again_without_the_edge_term():
     assert r.converged and plain.converged
     retry = r.diagnostics["edge_retry"]
     s = SolverSettings()
-    assert retry is not None and s.fallback_stall < retry["iterations"] <= cap and retry["residual"] > 1e-8
+    assert retry is not None and s.edge_stall < retry["iterations"] <= cap and retry["residual"] > 1e-8
     assert r.iterations == retry["iterations"] + plain.iterations and r.fft_pairs > plain.fft_pairs
     assert abs(r.area - plain.area) * n * n <= 1
     assert plain.diagnostics["edge_retry"] is None
@@ -226,7 +226,7 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     from there on the solve is bit for bit the one without the term from the start, plus the first
     attempt's pairs. With the rule off (and fallback_coarse, which would hand that grid and the finer
     one to the fallback), the coarse grid runs on to coarse_max_it and the fine one stalls too (ended
-    by edge_newton_max or fallback_stall; which comes first depends on the FFTs' rounding: 25 alone,
+    by edge_newton_max or edge_stall; which comes first depends on the FFTs' rounding: 25 alone,
     24 within the whole suite, measured)."""
     from vecontact.solver import solve_contact
     n = 128
@@ -247,8 +247,8 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     off = solve_contact(fft, L_PAPER, h, mod, 0.01, 3e4, tolerance=1e-8, store=(),
                         petsc_options=["-vc_edge_capped_max 0", "-vc_fallback_coarse off"])
     assert off.diagnostics["levels"][0]["iterations"] == s.coarse_max_it
-    # the fine grid stalls too, and starts again without the term by the count or, sooner, by fallback_stall
-    assert s.fallback_stall < off.diagnostics["edge_retry"]["iterations"] <= s.edge_newton_max
+    # the fine grid stalls too, and starts again without the term by the count or, sooner, by edge_stall
+    assert s.edge_stall < off.diagnostics["edge_retry"]["iterations"] <= s.edge_newton_max
     assert off.fft_pairs > 3 * r.fft_pairs
 
 

@@ -55,9 +55,9 @@ class SolverSettings:
     fallback_coarse_measure: float = _knob(1.0, "... only if its measure ended above this (the study's coarse "
                                            "grids have ended unconverged at up to 0.17, the hard rubbers' at "
                                            "5.8-9.5e3) [RESULTS.md]", lo=0)
-    fallback_stall: int = _knob(20, "... or sooner, once its full steps' measure has not reached a new lowest in "
-                                "this many Newton iterations (with the edge term in use: first again without "
-                                "it; 0: never) [RESULTS.md]", lo=0)
+    fallback_stall: int = _knob(10, "... or sooner, once its full steps' measure has not reached a new lowest in "
+                                "this many Newton iterations (0: never; was 20 until the fallback was the VI "
+                                "method) [RESULTS.md]", lo=0)
     lin_rtol: float = _knob(0.1, "Krylov rtol of a Newton step whose active set changed", lo=0, hi=1, lo_open=True)
     lin_rtol_min: float = _knob(1e-6, "lin_rtol is never tightened below this", lo=0, hi=1, lo_open=True)
     first_rtol_factor: float = _knob(0.1, "first step of each grid level: rtol = this x lin_rtol [RESULTS.md]",
@@ -150,6 +150,9 @@ class SolverSettings:
     edge_newton_max: int = _knob(25, "... the finest grid's solve not converged after this many Newton iterations "
                                  "with the term starts again without it (it can stall the steps; m_CC alone "
                                  "cannot; 0: never) [RESULTS.md]", lo=0)
+    edge_stall: int = _knob(20, "... or sooner, once its measure has not reached a new lowest in this many "
+                            "Newton iterations with the term in use (only where fallback_stall counts; 0: never) "
+                            "[RESULTS.md]", lo=0)
     edge_capped_max: int = _knob(3, "... or sooner, once this many Newton steps in a row ran with the term and used "
                                  "the whole ksp_max_it (the stall's mark; any grid; 0: never) [RESULTS.md]", lo=0)
     edge_schur_modulus_min: float = _knob(300.0, "... where the modulus's range max|E|/min|E| over the grid exceeds "

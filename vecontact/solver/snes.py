@@ -195,7 +195,7 @@ class _Convergence:
         self.monitor = monitor
         self.history = []      # (iteration, measure, FFT transforms so far)
         self.form = form                        # its edge_used (_Semismooth; the VI form has none)
-        self.settings = settings                # edge_newton_max, edge_capped_max, ksp_max_it, fallback_stall
+        self.settings = settings                # edge_newton_max, edge_capped_max, ksp_max_it, *_stall
         self.edge_capped = 0                    # Newton steps in a row with the term that used all of ksp_max_it
         self.edge_stalled = False
         self.lowest = (np.inf, 1)               # the lowest measure since the first step, and its iteration
@@ -229,13 +229,17 @@ class _Convergence:
 
     def _measure_stalled(self, it, res):
         """Whether the measure has not reached a new lowest in the last SolverSettings.fallback_stall Newton
-        iterations (0: never), counted from the first step's: a good start (a coarse grid's) can measure
-        lower than the steps that must first move its set (64^2, sharp rubber: 8.4, then 129, 25, ...
-        converging at 26).  The paper's finest grids go at most 3 without a new lowest; full steps that
-        fail go 13-20 by their 20th iteration (RESULTS.md, "`fallback_stall`")."""
+        iterations, or edge_stall while the edge term is in use (fallback_stall 0: never), counted from
+        the first step's: a good start (a coarse grid's) can measure lower than the steps that must first
+        move its set (64^2, sharp rubber: 8.4, then 129, 25, ... converging at 26).  The paper's finest
+        grids go at most 3 without a new lowest; full steps that fail go 13-20 by their 20th iteration
+        (RESULTS.md, "`fallback_stall`"); with the term, 10 lost on the sharp rubber at 10 m/s."""
         if it >= 1 and res < self.lowest[0]:
             self.lowest = (res, it)
-        n = getattr(self.settings, "fallback_stall", 0)
+        s = self.settings
+        n = getattr(s, "fallback_stall", 0)
+        if n and getattr(self.form, "edge_used", False):
+            n = s.edge_stall
         return bool(n and it - self.lowest[1] >= n)
 
     def _edge_stalled(self, snes, it):
@@ -323,8 +327,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     starts again from ``g0`` without it; info's iterations, linear_iterations and seconds then count
     both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
     residual, seconds); the other entries are the second attempt's.  A solve still not converged, or
-    whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use: the
-    retry without it), starts again from ``g0`` by SolverSettings.fallback (unless the user chose a
+    whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use:
+    edge_stall, and the retry without it first), starts again from ``g0`` by SolverSettings.fallback (unless the user chose a
     line search or the VI method): "vi", PETSc's reduced-space VI Newton (vi.py); or a PETSc line
     search on the full steps (without the term if it was retried), then full steps from that attempt's
     last iterate to ``max_it`` if it stopped short.  The fallback's own attempt runs to
