@@ -328,12 +328,12 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     both attempts, and info["edge_retry"] holds the first one's (iterations, linear_iterations,
     residual, seconds); the other entries are the second attempt's.  A solve still not converged, or
     whose measure reached no new lowest in fallback_stall Newton iterations (with the term in use:
-    edge_stall, and the retry without it first), starts again from ``g0`` by SolverSettings.fallback (unless the user chose a
-    line search or the VI method): "vi", PETSc's reduced-space VI Newton (vi.py); or a PETSc line
-    search on the full steps (without the term if it was retried), then full steps from that attempt's
-    last iterate to ``max_it`` if it stopped short.  The fallback's own attempt runs to
-    SolverSettings.fallback_max_it.  All count, info["fallback_retry"]
-    holds the full steps' attempt, and info["edge_retry"] their retry if there was one.  With
+    edge_stall, and the retry without it first), starts again from ``g0`` by SolverSettings.fallback
+    (unless the user chose a line search or the VI method): "vi", PETSc's reduced-space VI Newton
+    (vi.py); or a PETSc line search on the full steps (without the term if it was retried), then full
+    steps from that attempt's last iterate to ``max_it`` if it stopped short.  The fallback's own
+    attempt runs to SolverSettings.fallback_max_it.  All count, info["fallback_retry"] holds the full
+    steps' attempt, and info["edge_retry"] their retry if there was one.  With
     ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
     full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
     full steps whose last measure is at most ``fallback_above`` (a coarse grid that nearly converged)

@@ -14,8 +14,8 @@ contact set").  With A empty the PC is the compliance c (m's inverse on the whol
 fail (RESULTS.md); it is kept as an independent second solver of the same problem; option defaults
 in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also the fallback of a solve whose full
 steps cannot converge, and of the grids finer than one whose full steps failed (-vc_fallback vi,
--vc_fallback_coarse: snes.ncp_solve, contact.py).  The semismooth VI variant (vinewtonssls) was removed: it did not
-converge with the compliance preconditioner.
+-vc_fallback_coarse: snes.ncp_solve, contact.py).  The semismooth VI variant (vinewtonssls) was
+removed: it did not converge with the compliance preconditioner.
 """
 from __future__ import annotations
 
