@@ -52,9 +52,10 @@ class SolverSettings:
     fallback_coarse: str = _knob("on", "on: a coarse grid whose full steps end unconverged at coarse_max_it "
                                  "is solved again by the fallback (to coarse_max_it), and the finer grids, the "
                                  "finest too, start with the fallback's attempt [RESULTS.md]", choices=("on", "off"))
-    fallback_coarse_measure: float = _knob(1.0, "... only if its measure ended above this (the study's coarse "
-                                           "grids have ended unconverged at up to 0.17, the hard rubbers' at "
-                                           "5.8-9.5e3) [RESULTS.md]", lo=0)
+    fallback_coarse_measure: float = _knob(10.0, "... only if its measure ended above this (the study's coarse "
+                                           "grids have ended unconverged at up to 0.17; below 10 the rule lost "
+                                           "1.4-1.7x on some hard solves, from 38 up it gained 4-12x) [RESULTS.md]",
+                                           lo=0)
     fallback_stall: int = _knob(10, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (0: never; was 20 until the fallback was the VI "
                                 "method) [RESULTS.md]", lo=0)
