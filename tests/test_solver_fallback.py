@@ -123,6 +123,23 @@ def test_a_direct_solve_starts_with_the_fallback_s_attempt(monkeypatch):
         assert len(calls) == 1 and calls[0][1] == options and "fallback_direct" not in info
 
 
+def test_a_direct_attempt_that_fails_is_followed_by_full_steps_and_bt(monkeypatch):
+    """ncp_solve(direct=True) whose VI attempt does not converge: the ordinary attempts follow from the
+    same g0, full steps (with the stall rule) and then bt on the full steps (not the VI method again);
+    every attempt counts, info["direct_retry"] holds the VI attempt, fallback_direct stays True."""
+    import vecontact.solver.snes as snes
+    calls = []
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 3))
+    g0 = np.zeros(2)
+    s = SolverSettings()
+    _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {}, direct=True)
+    assert [c[1].get("snes_type") for c in calls] == ["vinewtonrsls", None, None]
+    assert [c[1].get("snes_linesearch_type") for c in calls] == ["bt", None, "bt"]
+    assert [c[2] for c in calls] == [0, s.fallback_stall, 0] and all(c[0] is g0 for c in calls)
+    assert info["converged"] and info["fallback_direct"] and info["iterations"] == 60
+    assert info["direct_retry"]["iterations"] == 10 and info["fallback_retry"]["iterations"] == 20
+
+
 def test_full_steps_that_end_near_their_tolerance_take_no_fallback_when_asked(monkeypatch):
     """ncp_solve(fallback_above=x), as contact.py calls it on the coarse grids (fallback_coarse_measure):
     full steps that end unconverged at a measure of at most x end the solve; above x the fallback

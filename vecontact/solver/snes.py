@@ -336,8 +336,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     steps' attempt, and info["edge_retry"] their retry if there was one.  With
     ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
     full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
-    full steps whose last measure is at most ``fallback_above`` (a coarse grid that nearly converged)
-    take no fallback.
+    if that attempt fails, the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none
+    (a line search), info["direct_retry"] holding the first.  Full steps whose last measure is at most
+    ``fallback_above`` (a coarse grid that nearly converged) take no fallback.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -347,6 +348,7 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
         gc.freeze()
     try:
         method = settings.fallback
+        given = settings
         opts = dict(options or {})
         fallback = not (method == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
         info = None
@@ -374,7 +376,14 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
                                          else replace(settings, edge_window=0), opts, lsopts, monitor)
         if info is None:
             again[3]["fallback_direct"] = True
-            return again
+            if again[3]["converged"]:
+                return again
+            # the VI method on a large contact set can stall where full steps and bt converge (the SLS at
+            # 1 mm/s, 29 %, in a warm-started chain: RESULTS.md): the ordinary attempts from g0, bt the fallback
+            later = ncp_solve(op, g0, tol, max_it, replace(given, fallback="bt" if method == "vi" else "none"),
+                              options, monitor)
+            later[3]["fallback_direct"] = True
+            return _after(again[3], later, "direct_retry")
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "fallback_retry")
