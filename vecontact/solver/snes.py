@@ -348,48 +348,52 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
         gc.freeze()
     try:
         method = settings.fallback
-        given = settings
         opts = dict(options or {})
         fallback = not (method == "none" or "snes_linesearch_type" in opts or _is_vi(opts))
-        info = None
-        if not (direct and fallback):
-            # the stall rule hands over to the fallback: none without it
-            g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
-                                             replace(settings, fallback_stall=0), options, monitor)
-            if info["converged"] or not fallback or info["residual"] <= fallback_above:
-                return g, p, act, info
-        # full steps of the primal-dual active-set method have no convergence guarantee for a
-        # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
-        # again from g0, and every attempt counts
-        settings = replace(settings, fallback_stall=0)
-        # its measure falls slowly but steadily: the 2048^2 sharp rubber's bt needed 126 (RESULTS.md)
-        fb_it = settings.fallback_max_it
-        # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
-        lsopts = dict({"snes_max_fail": str(fb_it)}, **opts,
-                      snes_linesearch_type="bt" if method == "vi" else method)
-        if method == "vi":
-            # its steps project the gap onto g >= 0; with full steps it wandered in 2 of 5 solves at 256^2,
-            # with bt it converged in all (RESULTS.md, "`fallback`"); it has no edge term to retry without
-            again = _edge_attempts(op, g0, tol, fb_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
-        else:
-            again = _linesearch_attempts(op, g0, tol, fb_it, max_it, settings if not (info or {}).get("edge_retry")
-                                         else replace(settings, edge_window=0), opts, lsopts, monitor)
-        if info is None:
+        if direct and fallback:
+            again = _fallback_attempts(op, g0, tol, max_it, settings, opts, False, monitor)
             again[3]["fallback_direct"] = True
             if again[3]["converged"]:
                 return again
             # the VI method on a large contact set can stall where full steps and bt converge (the SLS at
             # 1 mm/s, 29 %, in a warm-started chain: RESULTS.md): the ordinary attempts from g0, bt the fallback
-            later = ncp_solve(op, g0, tol, max_it, replace(given, fallback="bt" if method == "vi" else "none"),
+            later = ncp_solve(op, g0, tol, max_it, replace(settings, fallback="bt" if method == "vi" else "none"),
                               options, monitor)
             later[3]["fallback_direct"] = True
             return _after(again[3], later, "direct_retry")
+        # the stall rule hands over to the fallback: none without it
+        g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
+                                         replace(settings, fallback_stall=0), options, monitor)
+        if info["converged"] or not fallback or info["residual"] <= fallback_above:
+            return g, p, act, info
+        # full steps of the primal-dual active-set method have no convergence guarantee for a
+        # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
+        # again from g0, and every attempt counts
+        again = _fallback_attempts(op, g0, tol, max_it, settings, opts, bool(info.get("edge_retry")), monitor)
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "fallback_retry")
     finally:
         if thaw:
             gc.unfreeze()
+
+
+def _fallback_attempts(op, g0, tol, max_it, settings, opts, edge_retried, monitor):
+    """The fallback's attempt from ``g0`` (ncp_solve), by SolverSettings.fallback, to fallback_max_it and
+    without the stall rule: the VI method with bt, or a line search on the full steps (without the
+    edge term if the full steps had to drop it: ``edge_retried``) and full steps after it."""
+    method = settings.fallback
+    settings = replace(settings, fallback_stall=0)
+    # its measure falls slowly but steadily: the 2048^2 sharp rubber's bt needed 126 (RESULTS.md)
+    fb_it = settings.fallback_max_it
+    # a step whose line search fails still moves the iterate (snes_max_fail): bt stopped otherwise
+    lsopts = dict({"snes_max_fail": str(fb_it)}, **opts, snes_linesearch_type="bt" if method == "vi" else method)
+    if method == "vi":
+        # its steps project the gap onto g >= 0; with full steps it wandered in 2 of 5 solves at 256^2,
+        # with bt it converged in all (RESULTS.md, "`fallback`"); it has no edge term to retry without
+        return _edge_attempts(op, g0, tol, fb_it, settings, dict(lsopts, snes_type="vinewtonrsls"), monitor)
+    return _linesearch_attempts(op, g0, tol, fb_it, max_it, replace(settings, edge_window=0) if edge_retried
+                                else settings, opts, lsopts, monitor)
 
 
 def _linesearch_attempts(op, g0, tol, fb_it, max_it, settings, opts, lsopts, monitor):
