@@ -1,5 +1,7 @@
 """The fallback after full Newton steps fail (snes.ncp_solve, SolverSettings.fallback): the order of the
 attempts with a stand-in for one attempt, and whole solves it rescues."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -203,19 +205,50 @@ def test_after_a_coarse_grid_that_needed_the_fallback_the_finer_grids_start_with
 def test_the_stall_count_runs_from_the_lowest_measure_after_the_start():
     """_Convergence._measure_stalled: true once fallback_stall Newton iterations have passed since the
     lowest measure after the start (ties are no new lowest; the start's own measure does not count),
-    edge_stall once a step has used the edge term; never with fallback_stall 0."""
+    edge_stall once a step has used the edge term; never with fallback_stall 0.  (The cycle rule off:
+    the ties here would be cycles, next test.)"""
     from types import SimpleNamespace
     from vecontact.solver.snes import _Convergence
-    conv = _Convergence(None, None, 1e-8, None, settings=SolverSettings(fallback_stall=3, edge_stall=5))
+    conv = _Convergence(None, None, 1e-8, None, settings=SolverSettings(fallback_stall=3, edge_stall=5, cycle_rtol=0))
     seq = [(0, 1.0), (1, 7.0), (2, 4.0), (3, 4.0), (4, 6.0), (5, 9.0), (6, 3.0), (7, 5.0), (8, 5.0), (9, 5.0)]
     assert [conv._measure_stalled(it, r) for it, r in seq] == [False] * 5 + [True, False, False, False, True]
     edge = _Convergence(None, None, 1e-8, None, form=SimpleNamespace(edge_used=True),
-                        settings=SolverSettings(fallback_stall=3, edge_stall=5))
+                        settings=SolverSettings(fallback_stall=3, edge_stall=5, cycle_rtol=0))
     seq = [(0, 1.0), (1, 7.0), (2, 4.0)] + [(it, 6.0) for it in range(3, 9)]
     assert [edge._measure_stalled(it, r) for it, r in seq] == [False] * 7 + [True, True]
     for form in (None, SimpleNamespace(edge_used=True)):
         off = _Convergence(None, None, 1e-8, None, form=form, settings=SolverSettings(fallback_stall=0))
         assert not any(off._measure_stalled(it, 1.0) for it in range(50))
+
+
+def test_full_steps_that_cycle_stop_at_the_first_return():
+    """_Convergence._measure_stalled: true as soon as the measure comes back to within cycle_rtol of one
+    2 to cycle_period iterates before, the last one differing, long before the stall count (where
+    fallback_stall counts).  The
+    sequence is the SLS rubber's at 1024^2, 0.1 mm/s (RESULTS.md, "`cycle_rtol`"): a 3-cycle whose
+    measures repeat to 1e-6 and now and then reach a new lowest by 1e-9, so the count alone waited 25
+    iterations."""
+    from vecontact.solver.snes import _Convergence
+    cyc = [128.3446115802464, 220.80595819742814, 170.93266187928808, 128.34505900724557, 220.805675021789,
+           170.9326464595539, 128.34452491418259, 220.8061717601258]
+    seq = list(enumerate([5930.9, 4876.0, 1908.3, 2688.9, 244.5, 192.2] + cyc))
+    S = SolverSettings()
+    assert S.cycle_rtol > 0 and S.cycle_period >= 3 and S.fallback_stall > 0
+    on = _Convergence(None, None, 1e-8, None, settings=S)
+    assert [on._measure_stalled(it, r) for it, r in seq].index(True) == 9      # 128.345 after 128.3446
+    for off in (replace(S, cycle_rtol=0), replace(S, fallback_stall=0), replace(S, cycle_period=2)):
+        conv = _Convergence(None, None, 1e-8, None, settings=off)
+        assert not any(conv._measure_stalled(it, r) for it, r in seq)
+    # within 1e-4, not 1e-5, is no return; nor is a plateau that creeps (the 64^2 sharp rubber's, which
+    # got out at its 19th iteration and converged at its 27th); a 2-cycle is one
+    conv = _Convergence(None, None, 1e-8, None, settings=S)
+    assert not any(conv._measure_stalled(it, r) for it, r in enumerate([10.0, 5.0, 8.0, 5.0005, 4.0]))
+    creep = [30.29, 32.40, 20.89, 16.16, 15.39, 14.12, 13.499, 13.6216, 13.2308, 13.1767, 13.1731, 13.1713,
+             13.1714, 13.1709, 13.1701, 13.168, 13.1667, 13.1667, 9.77]
+    conv = _Convergence(None, None, 1e-8, None, settings=S)
+    assert not any(conv._measure_stalled(it, r) for it, r in enumerate(creep, 1))
+    conv = _Convergence(None, None, 1e-8, None, settings=S)
+    assert [conv._measure_stalled(it, r) for it, r in enumerate([9.0, 7.0, 3.0, 7.0 * (1 + 2e-6)])] == [False] * 3 + [True]
 
 
 @pytest.mark.parametrize("fallback", ["vi", "bt"])
@@ -266,3 +299,41 @@ def test_a_coarse_grid_that_needs_the_fallback_hands_it_to_the_finer_grid():
     assert abs(on.area - off.area) * 256 ** 2 <= 1
     assert abs(on.mu - off.mu) <= 1e-8 * abs(off.mu)
     assert on.fft_pairs < off.fft_pairs / 3, (on.fft_pairs, off.fft_pairs)
+
+
+def test_a_solve_whose_full_steps_cycle_hands_over_at_the_return():
+    """The sharp rubber (alpha = beta = 0.8, tau 1 us) at 1 cm/s on the tests' 64^2 surface (seed 7),
+    sigma0 = 3e-3 |E(8 q0 v)|, 62 % in contact: the full steps settle into a 2-cycle (14.4534, 14.4541,
+    14.4534 at iterations 13-15, measured with this machine's FFTW plans) and hand over at its first
+    return, before the stall count (its lowest, 8.8, was at iteration 6); with cycle_rtol 0 they run on
+    until the count fires.  Both converge to the same contact set and mu."""
+    import pyfftw
+    from vecontact.physics.modulus import HavriliakNegami
+    from vecontact.solver import solve_contact
+    n, v = 64, 0.01
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=7)
+    mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
+    sigma0 = 3e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * v]))[0]))
+    # the path rounds with the FFT plans: the estimate planner's, not wisdom that earlier tests loaded
+    pyfftw.forget_wisdom()
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    S = SolverSettings()
+    runs = {}
+    for rtol in (S.cycle_rtol, 0.0):
+        seen = []
+        r = solve_contact(fft, L_PAPER, h, mod, v, sigma0, store=("pressure",),
+                          petsc_options=["-vc_cycle_rtol", str(rtol)], monitor=lambda N, it, m: seen.append((it, m)))
+        first = r.diagnostics["fallback_retry"]
+        assert r.converged and first is not None
+        steps = [m for it, m in seen[:first["iterations"] + 1]]       # the full steps' attempt, from its start
+        assert [it for it, _ in seen[:first["iterations"] + 1]] == list(range(first["iterations"] + 1))
+        low = 1 + int(np.argmin(steps[1:]))
+        runs[rtol] = r, steps, low
+    (on, steps, low), (off, steps_off, low_off) = runs[S.cycle_rtol], runs[0.0]
+    k = len(steps) - 1
+    assert k < low + S.fallback_stall                                  # not the count
+    assert any(abs(steps[k] - steps[k - j]) <= S.cycle_rtol * steps[k] for j in range(2, S.cycle_period + 1))
+    assert abs(steps[k] - steps[k - 1]) > S.cycle_rtol * steps[k]
+    assert len(steps_off) - 1 == low_off + S.fallback_stall and len(steps_off) > len(steps)
+    assert np.array_equal(on.pressure > 0, off.pressure > 0)
+    assert abs(on.mu - off.mu) <= 1e-8 * abs(off.mu)

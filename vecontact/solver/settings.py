@@ -59,6 +59,10 @@ class SolverSettings:
     fallback_stall: int = _knob(10, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (0: never; was 20 until the fallback was the VI "
                                 "method) [RESULTS.md]", lo=0)
+    cycle_rtol: float = _knob(1e-5, "... or at once, once its measure comes back to within this relative difference "
+                              "of one 2 to cycle_period iterates before, the last one differing: full steps "
+                              "that cycle never converge (0: never) [RESULTS.md]", lo=0, hi=1)
+    cycle_period: int = _knob(4, "... the longest cycle looked for", lo=2)
     lin_rtol: float = _knob(0.1, "Krylov rtol of a Newton step whose active set changed", lo=0, hi=1, lo_open=True)
     lin_rtol_min: float = _knob(1e-6, "lin_rtol is never tightened below this", lo=0, hi=1, lo_open=True)
     first_rtol_factor: float = _knob(0.1, "first step of each grid level: rtol = this x lin_rtol [RESULTS.md]",

@@ -199,6 +199,7 @@ class _Convergence:
         self.edge_capped = 0                    # Newton steps in a row with the term that used all of ksp_max_it
         self.edge_stalled = False
         self.lowest = (np.inf, 1)               # the lowest measure since the first step, and its iteration
+        self.recent = []                        # the last cycle_period measures before this one
 
     def __call__(self, snes, it, norms):
         PETSc = petsc()
@@ -233,14 +234,24 @@ class _Convergence:
         the first step's: a good start (a coarse grid's) can measure lower than the steps that must first
         move its set (64^2, sharp rubber: 8.4, then 129, 25, ... converging at 26).  The paper's finest
         grids go at most 3 without a new lowest; full steps that fail go 13-20 by their 20th iteration
-        (RESULTS.md, "`fallback_stall`"); with the term, 10 lost on the sharp rubber at 10 m/s."""
+        (RESULTS.md, "`fallback_stall`"); with the term, 10 lost on the sharp rubber at 10 m/s.
+        Or whether the measure came back to within cycle_rtol of one 2 to cycle_period iterates before,
+        the last one differing: full steps that cycle never converge, and a cycle's new lowests by 1e-9
+        kept the count from firing (RESULTS.md, "`cycle_rtol`")."""
         if it >= 1 and res < self.lowest[0]:
             self.lowest = (res, it)
         s = self.settings
         n = getattr(s, "fallback_stall", 0)
-        if n and getattr(self.form, "edge_used", False):
+        if not n:
+            return False
+        if getattr(self.form, "edge_used", False):
             n = s.edge_stall
-        return bool(n and it - self.lowest[1] >= n)
+        # a return: the measure back to one 2..cycle_period iterates before, the last differing (a plateau
+        # that creeps, 13.1731, 13.1713, 13.1714, 13.1709 ..., can still get out: 64^2, sharp rubber)
+        near = [abs(res - r) <= s.cycle_rtol * res for r in self.recent]
+        cycled = s.cycle_rtol > 0 and len(near) >= 2 and not near[-1] and any(near[:-1])
+        self.recent = (self.recent + [res])[-s.cycle_period:]
+        return bool(cycled or (n and it - self.lowest[1] >= n))
 
     def _edge_stalled(self, snes, it):
         """Whether the solve, not converged after Newton iteration ``it``, stalls on the edge term: it ran
