@@ -93,7 +93,9 @@ def test_the_line_search_goes_without_the_edge_term_when_it_stalled_the_full_ste
     assert info["edge_retry"]["iterations"] == 8
     windows.clear()
     _, _, _, info = snes.ncp_solve(None, np.zeros(2), 1e-8, 100, SolverSettings(edge_window=2, fallback="vi"), {})
-    assert len(windows) == 2 and info["edge_retry"]["iterations"] == 8 and info["iterations"] == 10
+    # the VI attempt (no edge term of its own) fails too: bt without the term follows, then full steps
+    assert windows == [2, 2, 0, 0] and info["edge_retry"]["iterations"] == 8 and info["iterations"] == 20
+    assert info["vi_retry"]["iterations"] == 5 and not info["converged"]
 
 
 def test_a_direct_solve_starts_with_the_fallback_s_attempt(monkeypatch):
@@ -140,6 +142,47 @@ def test_a_direct_attempt_that_fails_is_followed_by_full_steps_and_bt(monkeypatc
     assert [c[2] for c in calls] == [0, s.fallback_stall, 0] and all(c[0] is g0 for c in calls)
     assert info["converged"] and info["fallback_direct"] and info["iterations"] == 60
     assert info["direct_retry"]["iterations"] == 10 and info["fallback_retry"]["iterations"] == 20
+
+
+def test_a_vi_attempt_that_fails_after_full_steps_is_followed_by_bt(monkeypatch):
+    """ncp_solve after failed full steps whose VI attempt fails too (vi_stall, say): bt on the full steps
+    from the same g0 follows, to fallback_max_it and without the stall rule; every attempt counts,
+    info["vi_retry"] holds the VI attempt and info["fallback_retry"] the full steps'.  A VI attempt
+    that converges is not followed by one."""
+    import vecontact.solver.snes as snes
+    calls = []
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 3))
+    g0 = np.zeros(2)
+    s = SolverSettings()
+    _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {})
+    assert [c[1].get("snes_type") for c in calls] == [None, "vinewtonrsls", None]
+    assert [c[1].get("snes_linesearch_type") for c in calls] == [None, "bt", "bt"]
+    assert [c[2] for c in calls] == [s.fallback_stall, 0, 0] and all(c[0] is g0 for c in calls)
+    assert [c[4] for c in calls] == [100, s.fallback_max_it, s.fallback_max_it]
+    assert info["converged"] and info["iterations"] == 60
+    assert info["vi_retry"]["iterations"] == 20 and info["fallback_retry"]["iterations"] == 10
+    calls.clear()
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 2))
+    _, _, _, info = snes.ncp_solve(None, g0, 1e-8, 100, s, {})
+    assert len(calls) == 2 and info["converged"] and "vi_retry" not in info
+
+
+def test_a_vi_attempt_ends_once_its_measure_stops_reaching_a_new_lowest():
+    """_Convergence._measure_stalled for the VI method's form (the fallback's attempt, fallback_stall 0, or
+    the user's): true once vi_stall Newton iterations have passed since its lowest measure; returns are
+    not looked for (no cycle rule); never with vi_stall 0."""
+    from vecontact.solver.snes import _Convergence
+    from vecontact.solver.vi import ViNewton
+    S = replace(SolverSettings(), fallback_stall=0)
+    assert S.vi_stall == 20 and SolverSettings().cycle_rtol > 0
+    vi = ViNewton.__new__(ViNewton)
+    seq = [(0, 50.0), (1, 30.0), (2, 19.7)] + [(it, 19.8 + 0.1 * (it % 2)) for it in range(3, 30)]
+    on = _Convergence(None, None, 1e-8, None, form=vi, settings=S)
+    assert [on._measure_stalled(it, r) for it, r in seq].index(True) == 2 + S.vi_stall
+    off = _Convergence(None, None, 1e-8, None, form=vi, settings=replace(S, vi_stall=0))
+    assert not any(off._measure_stalled(it, r) for it, r in seq)
+    full = _Convergence(None, None, 1e-8, None, settings=S)       # full steps without the stall rule
+    assert not any(full._measure_stalled(it, r) for it, r in seq)
 
 
 def test_full_steps_that_end_near_their_tolerance_take_no_fallback_when_asked(monkeypatch):

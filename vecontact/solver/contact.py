@@ -227,7 +227,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          smoothed_steps=int(info.get("smoothed_steps", 0)),
                          edge_retry=info.get("edge_retry"), fallback_retry=info.get("fallback_retry"),
                          fallback_direct=bool(info.get("fallback_direct", False)),
-                         direct_retry=info.get("direct_retry")),
+                         direct_retry=info.get("direct_retry"), vi_retry=info.get("vi_retry")),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
@@ -240,5 +240,6 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
 def _level_info(n, info):
     """One grid level's entry of diagnostics["levels"], from its ncp_solve info."""
     return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
-                                                 "reason", "edge_retry", "fallback_retry", "direct_retry")},
+                                                 "reason", "edge_retry", "fallback_retry", "direct_retry",
+                                                 "vi_retry")},
                 fallback_direct=bool(info.get("fallback_direct", False)))

@@ -47,6 +47,9 @@ class SolverSettings:
     vi_step_rtol: float = _knob(1e-5, "Krylov rtol of the VI method's steps, solved on its active set like a "
                                 "contact-set step (vi.py); looser ones need not descend [RESULTS.md]",
                                 lo=0, hi=1, lo_open=True)
+    vi_stall: int = _knob(20, "... its attempt ends once its measure has not reached a new lowest in this many "
+                          "Newton iterations: converging ones went at most 8, a failing one ran 300 (0: never) "
+                          "[RESULTS.md]", lo=0)
     fallback_max_it: int = _knob(300, "Newton iterations of the fallback's attempt (numerics.max_iterations "
                                  "wins): bt's measure falls by a few % an iteration [RESULTS.md]", lo=1)
     fallback_coarse: str = _knob("on", "on: a coarse grid whose full steps end unconverged at coarse_max_it "

@@ -237,10 +237,14 @@ class _Convergence:
         (RESULTS.md, "`fallback_stall`"); with the term, 10 lost on the sharp rubber at 10 m/s.
         Or whether the measure came back to within cycle_rtol of one 2 to cycle_period iterates before,
         the last one differing: full steps that cycle never converge, and a cycle's new lowests by 1e-9
-        kept the count from firing (RESULTS.md, "`cycle_rtol`")."""
+        kept the count from firing (RESULTS.md, "`cycle_rtol`").  The VI method's attempts (the fallback's
+        or the user's) count to vi_stall instead: its converging attempts went at most 8 iterations without
+        a new lowest, a failing one ran its 300 (RESULTS.md, "`vi_stall`")."""
         if it >= 1 and res < self.lowest[0]:
             self.lowest = (res, it)
         s = self.settings
+        if isinstance(self.form, ViNewton):     # the VI method: its own count, no cycles looked for
+            return bool(s is not None and s.vi_stall and it - self.lowest[1] >= s.vi_stall)
         n = getattr(s, "fallback_stall", 0)
         if not n:
             return False
@@ -348,7 +352,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
     full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
     if that attempt fails, the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none
-    (a line search), info["direct_retry"] holding the first.  Full steps whose last measure is at most
+    (a line search), info["direct_retry"] holding the first; a failed VI attempt after failed full steps
+    is followed by bt from ``g0`` (info["vi_retry"] holding it).  Full steps whose last measure is at most
     ``fallback_above`` (a coarse grid that nearly converged) take no fallback.
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
@@ -380,7 +385,14 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
         # full steps of the primal-dual active-set method have no convergence guarantee for a
         # non-symmetric m (the SLS rubber at 1 mm/s wanders for ever, RESULTS.md): the solve starts
         # again from g0, and every attempt counts
-        again = _fallback_attempts(op, g0, tol, max_it, settings, opts, bool(info.get("edge_retry")), monitor)
+        edge_retried = bool(info.get("edge_retry"))
+        again = _fallback_attempts(op, g0, tol, max_it, settings, opts, edge_retried, monitor)
+        if not again[3]["converged"] and method == "vi":
+            # the VI method failed (it stalled, vi_stall, or ran out): bt on the full steps from g0,
+            # as after a failed direct attempt
+            later = _fallback_attempts(op, g0, tol, max_it, replace(settings, fallback="bt"), opts, edge_retried,
+                                       monitor)
+            again = _after(again[3], later, "vi_retry")
         if "edge_retry" in info:        # the full steps' retry without the term
             again[3].setdefault("edge_retry", info["edge_retry"])
         return _after(info, again, "fallback_retry")
