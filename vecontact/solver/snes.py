@@ -238,8 +238,8 @@ class _Convergence:
         Or whether the measure came back to within cycle_rtol of one 2 to cycle_period iterates before,
         the last one differing: full steps that cycle never converge, and a cycle's new lowests by 1e-9
         kept the count from firing (RESULTS.md, "`cycle_rtol`").  The VI method's attempts (the fallback's
-        or the user's) count to vi_stall instead: its converging attempts went at most 8 iterations without
-        a new lowest, a failing one ran its 300 (RESULTS.md, "`vi_stall`")."""
+        or the user's) count to vi_stall instead: its 145 converging attempts went at most 8 iterations
+        without a new lowest, a failing one ran its 300 (RESULTS.md, "`vi_stall`")."""
         if it >= 1 and res < self.lowest[0]:
             self.lowest = (res, it)
         s = self.settings
