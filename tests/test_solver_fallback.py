@@ -342,6 +342,13 @@ def test_a_coarse_grid_that_needs_the_fallback_hands_it_to_the_finer_grid():
     assert abs(on.area - off.area) * 256 ** 2 <= 1
     assert abs(on.mu - off.mu) <= 1e-8 * abs(off.mu)
     assert on.fft_pairs < off.fft_pairs / 3, (on.fft_pairs, off.fft_pairs)
+    # each level's measure history (its last attempt's): the failed coarse grid's 50 full steps from
+    # its start, every level ending at its residual, the finest's the result's own history
+    assert len(lv_off[1]["history"]) == SolverSettings().coarse_max_it + 1
+    for r in (on, off):
+        for lv in r.diagnostics["levels"]:
+            assert lv["history"] and abs(lv["history"][-1] - lv["residual"]) <= 1e-12 * lv["residual"]
+        assert r.diagnostics["levels"][-1]["history"] == [m for _, m in r.diagnostics["history"]]
 
 
 def test_a_solve_whose_full_steps_cycle_hands_over_at_the_return():

@@ -238,8 +238,11 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
 
 
 def _level_info(n, info):
-    """One grid level's entry of diagnostics["levels"], from its ncp_solve info."""
+    """One grid level's entry of diagnostics["levels"], from its ncp_solve info; its ``history`` is the
+    measure after each Newton iteration of its last attempt (from the start's): a rule for the coarse
+    grids can then be checked on a study's stored paths, as the finest grid's are (RESULTS.md)."""
     return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
                                                  "reason", "edge_retry", "fallback_retry", "direct_retry",
                                                  "vi_retry")},
-                fallback_direct=bool(info.get("fallback_direct", False)))
+                fallback_direct=bool(info.get("fallback_direct", False)),
+                history=[float(m) for _, m, *_ in info.get("history", [])])
