@@ -225,9 +225,7 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                          carried_directions=int(info.get("carried_directions", 0)),
                          stalls=int(info.get("stalls", 0)),
                          smoothed_steps=int(info.get("smoothed_steps", 0)),
-                         edge_retry=info.get("edge_retry"), fallback_retry=info.get("fallback_retry"),
-                         fallback_direct=bool(info.get("fallback_direct", False)),
-                         direct_retry=info.get("direct_retry"), vi_retry=info.get("vi_retry")),
+                         **_attempts(info)),
         # warm-start state: the gap always (snes restarts from it), the pressure when it is stored
         # anyway or for "pk" (which restarts from it); set res.warm_state = None to free the memory
         warm_state=dict(N=fft.N, shape=tuple(fft.local_real_shape), row_start=fft.row_start,
@@ -242,7 +240,12 @@ def _level_info(n, info):
     measure after each Newton iteration of its last attempt (from the start's): a rule for the coarse
     grids can then be checked on a study's stored paths, as the finest grid's are (RESULTS.md)."""
     return dict(N=n, **{k: info.get(k) for k in ("iterations", "linear_iterations", "converged", "residual",
-                                                 "reason", "edge_retry", "fallback_retry", "direct_retry",
-                                                 "vi_retry")},
-                fallback_direct=bool(info.get("fallback_direct", False)),
-                history=[float(m) for _, m, *_ in info.get("history", [])])
+                                                 "reason")},
+                **_attempts(info), history=[float(m) for _, m, *_ in info.get("history", [])])
+
+
+def _attempts(info):
+    """The earlier attempts of an ncp_solve (null where there was none) and whether it started with the
+    fallback's: the same keys in the result's diagnostics and in each of its levels."""
+    return dict({k: info.get(k) for k in ("edge_retry", "fallback_retry", "direct_retry", "vi_retry")},
+                fallback_direct=bool(info.get("fallback_direct", False)))
