@@ -14,10 +14,10 @@ from vecontact.solver.settings import SolverSettings
 
 
 def _stand_in(calls, converged_at):
-    """A stand-in for one attempt (_ncp_solve) that records its start, options, stall count and edge
-    window, and converges at attempt ``converged_at``."""
-    def attempt(op, g0, tol, max_it, settings, options, monitor):
-        calls.append((g0, dict(options or {}), settings.fallback_stall, settings.edge_window, max_it))
+    """A stand-in for one attempt (_ncp_solve) that records its start, options, stall count, edge
+    window, Newton iterations and coarse stall floor, and converges at attempt ``converged_at``."""
+    def attempt(op, g0, tol, max_it, settings, options, monitor, stall_above=0.0):
+        calls.append((g0, dict(options or {}), settings.fallback_stall, settings.edge_window, max_it, stall_above))
         converged = len(calls) == converged_at
         info = dict(iterations=10 * len(calls), linear_iterations=100 * len(calls), residual=1e-9 if converged
                     else 1.0, seconds=1.0, converged=converged, edge_stalled=False)
@@ -79,7 +79,7 @@ def test_the_line_search_goes_without_the_edge_term_when_it_stalled_the_full_ste
     import vecontact.solver.snes as snes
     windows = []
 
-    def attempt(op, g0, tol, max_it, settings, options, monitor):
+    def attempt(op, g0, tol, max_it, settings, options, monitor, stall_above=0.0):
         windows.append(settings.edge_window)
         info = dict(iterations=5, linear_iterations=50, residual=1.0, seconds=1.0, converged=False,
                     edge_stalled=False)
@@ -197,6 +197,39 @@ def test_full_steps_that_end_near_their_tolerance_take_no_fallback_when_asked(mo
     calls.clear()
     _, _, _, info = snes.ncp_solve(None, np.zeros(2), 1e-8, 50, SolverSettings(), {}, fallback_above=0.99)
     assert len(calls) == 2 and info["converged"] and info["fallback_retry"]["residual"] == 1.0
+    # x is the full steps' coarse stall floor (_Convergence._coarse_stalled), not the fallback's; none
+    # without a fallback to hand over to
+    assert [c[5] for c in calls] == [0.99, 0.0]
+    calls.clear()
+    snes.ncp_solve(None, np.zeros(2), 1e-8, 50, SolverSettings(fallback="none"), {}, fallback_above=0.99)
+    assert [c[5] for c in calls] == [0.0]
+
+
+def test_a_coarse_grid_s_full_steps_end_once_they_wander_above_the_fallback_s_threshold():
+    """_Convergence._coarse_stalled (a coarse grid's full steps: stall_above, ncp_solve's fallback_above):
+    true once coarse_stall Newton iterations have passed since the lowest measure while that lowest is
+    above stall_above; never once the lowest is at or below it, never for the VI method's attempts,
+    never with coarse_stall 0 or on the finest grid (stall_above 0)."""
+    from vecontact.solver.snes import _Convergence
+    from vecontact.solver.vi import ViNewton
+    S = replace(SolverSettings(), fallback_stall=0, coarse_stall=10)   # the coarse grids' settings (contact.py)
+
+    def fired(seq, stall_above=10.0, settings=S, form=None):
+        conv = _Convergence(None, None, 1e-8, None, form=form, settings=settings, stall_above=stall_above)
+        out = []
+        for it, r in enumerate(seq):
+            assert not conv._measure_stalled(it, r)             # fallback_stall 0: only the coarse rule
+            out.append(conv._coarse_stalled(it))
+        return out.index(True) if True in out else None
+    # a 128^2 grid's wandering (SLS rubber, session 83): lowest 104 at iteration 3
+    wander = [900.0, 420.0, 230.0, 104.0, 2300.0, 380.0, 5100.0, 160.0, 620.0, 104.5, 1900.0, 250.0, 700.0,
+              130.0, 3300.0, 180.0]
+    assert fired(wander) == 3 + 10
+    assert fired(wander, stall_above=200.0) is None         # its lowest is below the floor
+    assert fired(wander, stall_above=0.0) is None
+    assert fired(wander, settings=replace(S, coarse_stall=0)) is None
+    assert fired(wander, form=ViNewton.__new__(ViNewton)) is None
+    assert fired(wander[:4] + [99.0] + wander[5:]) == 4 + 10      # a new lowest restarts the count
 
 
 @pytest.mark.parametrize("switch", ["on", "off"])
@@ -216,7 +249,7 @@ def test_after_a_coarse_grid_that_needed_the_fallback_the_finer_grids_start_with
         n = op.fft.N
         fb = settings.fallback != "none" and not direct and n == 128
         seen.append((n, direct, settings.fallback, settings.fallback_stall, settings.fallback_max_it, max_it,
-                     fallback_above))
+                     fallback_above, settings.coarse_stall))
         info = dict(iterations=3, linear_iterations=9, residual=1e-12, seconds=0.0, converged=True,
                     reason=2, history=[], nchg=[], lin_history=[], modes=[], measures=(0.0, 0.0, 0.0))
         if fb:
@@ -237,8 +270,12 @@ def test_after_a_coarse_grid_that_needed_the_fallback_the_finer_grids_start_with
     coarse_fb = s.fallback if switch == "on" else "none"
     assert [x[0] for x in seen] == [64, 128, 256]
     assert [x[1] for x in seen] == ([False, False, True] if switch == "on" else [False, False, False])
-    assert seen[0][2:] == seen[1][2:] == (coarse_fb, 0, s.coarse_max_it, s.coarse_max_it, s.fallback_coarse_measure)
-    assert seen[2][2:] == (s.fallback, s.fallback_stall, s.fallback_max_it, s.newton_max_it, 0.0)
+    coarse = (coarse_fb, 0, s.coarse_max_it, s.coarse_max_it, s.fallback_coarse_measure)
+    # the coarse stall rule from coarse_stall_min_n (128) up, so not on 64^2; the finest grid's is off
+    # (fallback_above 0)
+    assert s.coarse_stall > 0 and s.coarse_stall_min_n == 128
+    assert seen[0][2:] == coarse + (0,) and seen[1][2:] == coarse + (s.coarse_stall,)
+    assert seen[2][2:-1] == (s.fallback, s.fallback_stall, s.fallback_max_it, s.newton_max_it, 0.0)
     levels = r.diagnostics["levels"]
     assert [lv["fallback_direct"] for lv in levels] == [False, False, switch == "on"]
     assert r.diagnostics["fallback_direct"] == (switch == "on")
@@ -323,16 +360,26 @@ def test_a_coarse_grid_that_needs_the_fallback_hands_it_to_the_finer_grid():
     the 256^2 one (the stall rule hands it to the fallback after 46).  With fallback_coarse on, the
     128^2 grid takes the fallback and the 256^2 grid starts with it: the same contact set and mu as
     with it off, in far fewer FFT pairs (measured on one rank: 1394 against 13 788, 6 Newton
-    iterations on 256^2 against 54)."""
+    iterations on 256^2 against 54).  The coarse stall rule hands the 128^2 grid over after 7 full
+    steps instead of 50 (measured; its measure stays in the thousands): 613 pairs against 1394
+    without it, the same contact set and mu."""
     from reference.cases import Q0, paper_case
     from vecontact.physics.modulus import SLS
     from vecontact.solver import solve_contact
     fft, h, _ = paper_case(256)
     mod = SLS(3e6, 3e8, 1e-5, NU)
     sigma0 = 1e-4 * abs(complex(mod(np.array([8 * Q0 * 0.001]))[0]))
-    on, off = (solve_contact(fft, L_PAPER, h, mod, 0.001, sigma0, store=(),
-                             petsc_options=["-vc_fallback_coarse", sw]) for sw in ("on", "off"))
-    assert on.converged and off.converged
+    on, off, nostall = (solve_contact(fft, L_PAPER, h, mod, 0.001, sigma0, store=(), petsc_options=opts)
+                        for opts in (["-vc_fallback_coarse", "on"], ["-vc_fallback_coarse", "off"],
+                                     ["-vc_coarse_stall", "0"]))
+    assert on.converged and off.converged and nostall.converged
+    S = SolverSettings()
+    full = [r.diagnostics["levels"][1]["fallback_retry"] for r in (on, nostall)]
+    assert S.coarse_stall <= full[0]["iterations"] < S.coarse_max_it == full[1]["iterations"]
+    assert full[0]["residual"] > S.fallback_coarse_measure
+    assert nostall.diagnostics["levels"][2]["fallback_direct"]
+    assert abs(on.area - nostall.area) * 256 ** 2 <= 1 and abs(on.mu - nostall.mu) <= 1e-8 * abs(on.mu)
+    assert on.fft_pairs < 0.6 * nostall.fft_pairs, (on.fft_pairs, nostall.fft_pairs)
     lv_on, lv_off = on.diagnostics["levels"], off.diagnostics["levels"]
     assert [lv["N"] for lv in lv_on] == [64, 128, 256]
     assert lv_on[1]["fallback_retry"] is not None and lv_on[2]["fallback_direct"]
@@ -345,7 +392,7 @@ def test_a_coarse_grid_that_needs_the_fallback_hands_it_to_the_finer_grid():
     # each level's measure history (its last attempt's): the failed coarse grid's 50 full steps from
     # its start, every level ending at its residual, the finest's the result's own history
     assert len(lv_off[1]["history"]) == SolverSettings().coarse_max_it + 1
-    for r in (on, off):
+    for r in (on, off, nostall):
         for lv in r.diagnostics["levels"]:
             assert lv["history"] and abs(lv["history"][-1] - lv["residual"]) <= 1e-12 * lv["residual"]
         assert r.diagnostics["levels"][-1]["history"] == [m for _, m in r.diagnostics["history"]]

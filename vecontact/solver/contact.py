@@ -137,10 +137,11 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
         elif lv:
             prev = None
             # the coarse grids' steps unsmoothed: smoothing them changed the pairs by -3 .. +4 % (RESULTS.md).
-            # No retry after edge_newton_max iterations there, nor the stall rule: a coarse solve ends at
-            # coarse_max_it anyway, and the study's coarse grids wander up to 49 iterations without a
-            # stall (RESULTS.md).  One that ends unconverged, far from its tolerance, takes the fallback
-            # (fallback_coarse), to coarse_max_it too: the study's have ended at measures up to 0.17
+            # No retry after edge_newton_max iterations there, nor the finest grid's stall rule: a coarse
+            # solve ends at coarse_max_it anyway, and the study's coarse grids creep to their tolerance for
+            # up to 49 iterations (RESULTS.md).  One that ends unconverged, far from its tolerance, takes
+            # the fallback (fallback_coarse), to coarse_max_it too: the study's have ended at measures up
+            # to 0.17.  Its full steps hand over sooner where they wander far from it (coarse_stall)
             coarse_cfg = replace(cfg, step_sweeps=0, edge_newton_max=0, fallback_stall=0,
                                  fallback_max_it=cfg.coarse_max_it,
                                  fallback=cfg.fallback if cfg.fallback_coarse == "on" else "none")
@@ -160,9 +161,12 @@ def solve_contact(fft, L, h, modulus, velocity, sigma0, *, tolerance=1e-8, metho
                     gc0 = smooth_gap(opc, prolong_gap(prev[0], prev[1], prev[2], opc), cfg.smooth_sweeps,
                                      cfg.smooth_ratio)
                 mon = None if monitor is None else (lambda it, r, m, n=n: monitor(n, it, r))
+                # coarse_stall from coarse_stall_min_n up: on 64^2 it saved little, and its handover sent
+                # easy solves' finer grids to the fallback at up to 2x their pairs (RESULTS.md)
                 gh, ph, _, inf = ncp_solve(opc, gc0, max(cfg.coarse_tol, tolerance), cfg.coarse_max_it,
-                                           coarse_cfg, options, monitor=mon, direct=direct,
-                                           fallback_above=cfg.fallback_coarse_measure)
+                                           coarse_cfg if n >= cfg.coarse_stall_min_n else
+                                           replace(coarse_cfg, coarse_stall=0), options, monitor=mon,
+                                           direct=direct, fallback_above=cfg.fallback_coarse_measure)
                 levels_info.append(_level_info(n, inf))
                 # full steps that could not solve a coarse grid wandered on the finer ones too: the finest
                 # grid took 1.4-24x the pairs of the fallback's attempt alone (RESULTS.md, "fallback_coarse")

@@ -59,6 +59,10 @@ class SolverSettings:
                                            "grids have ended unconverged at up to 0.17; below 10 the rule lost "
                                            "1.4-1.7x on some hard solves, from 38 up it gained 4-12x) [RESULTS.md]",
                                            lo=0)
+    coarse_stall: int = _knob(5, "... or sooner, once its full steps' measure has not reached a new lowest in this "
+                              "many Newton iterations while that lowest is above fallback_coarse_measure "
+                              "(0: never) [RESULTS.md]", lo=0)
+    coarse_stall_min_n: int = _knob(128, "... on coarse grids of at least this N [RESULTS.md]", lo=1)
     fallback_stall: int = _knob(10, "... or sooner, once its full steps' measure has not reached a new lowest in "
                                 "this many Newton iterations (0: never; was 20 until the fallback was the VI "
                                 "method) [RESULTS.md]", lo=0)

@@ -188,7 +188,7 @@ class _Semismooth:
 class _Convergence:
     """Our scale-free convergence test (operator.py measures <= tol), installed on the SNES."""
 
-    def __init__(self, state, policy, tol, monitor, form=None, settings=None):
+    def __init__(self, state, policy, tol, monitor, form=None, settings=None, stall_above=0.0):
         self.state = state
         self.policy = policy
         self.tol = tol
@@ -200,6 +200,7 @@ class _Convergence:
         self.edge_stalled = False
         self.lowest = (np.inf, 1)               # the lowest measure since the first step, and its iteration
         self.recent = []                        # the last cycle_period measures before this one
+        self.stall_above = stall_above          # a coarse grid's: coarse_stall counts while the lowest is above
 
     def __call__(self, snes, it, norms):
         PETSc = petsc()
@@ -224,6 +225,8 @@ class _Convergence:
             # fallback's line search (ncp_solve)
             self.edge_stalled = bool(getattr(self.form, "edge_used", False))
             return PETSc.SNES.ConvergedReason.DIVERGED_USER
+        if self._coarse_stalled(it):
+            return PETSc.SNES.ConvergedReason.DIVERGED_USER     # to the fallback, with the term or not
         if it >= snes.getTolerances()[3]:
             return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
         return PETSc.SNES.ConvergedReason.ITERATING
@@ -256,6 +259,15 @@ class _Convergence:
         cycled = s.cycle_rtol > 0 and len(near) >= 2 and not near[-1] and any(near[:-1])
         self.recent = (self.recent + [res])[-s.cycle_period:]
         return bool(cycled or (n and it - self.lowest[1] >= n))
+
+    def _coarse_stalled(self, it):
+        """Whether a coarse grid's full steps (``stall_above`` > 0: ncp_solve's fallback_above) have reached
+        no new lowest in SolverSettings.coarse_stall Newton iterations while that lowest is above
+        ``stall_above``: they wander, and would take the fallback after coarse_max_it anyway
+        (RESULTS.md, "`coarse_stall`").  After _measure_stalled, which keeps the lowest."""
+        s = self.settings
+        return bool(self.stall_above > 0 and s is not None and s.coarse_stall and not isinstance(self.form, ViNewton)
+                    and self.lowest[0] > self.stall_above and it - self.lowest[1] >= s.coarse_stall)
 
     def _edge_stalled(self, snes, it):
         """Whether the solve, not converged after Newton iteration ``it``, stalls on the edge term: it ran
@@ -354,7 +366,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     if that attempt fails, the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none
     (a line search), info["direct_retry"] holding the first; a failed VI attempt after failed full steps
     is followed by bt from ``g0`` (info["vi_retry"] holding it).  Full steps whose last measure is at most
-    ``fallback_above`` (a coarse grid that nearly converged) take no fallback.
+    ``fallback_above`` (a coarse grid that nearly converged) take no fallback; where there is one, they
+    end once their measure has reached no new lowest in SolverSettings.coarse_stall Newton iterations
+    while that lowest is above ``fallback_above`` (a coarse grid that wanders; contact.py).
     """
     # what is alive now is not the solve's: frozen, the collection that ends it walks only what the
     # solve made (the whole heap took 22 ms, 7 % of a 1.7 s solve at 1024^2; RESULTS.md).  Not when
@@ -379,7 +393,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
             return _after(again[3], later, "direct_retry")
         # the stall rule hands over to the fallback: none without it
         g, p, act, info = _edge_attempts(op, g0, tol, max_it, settings if fallback else
-                                         replace(settings, fallback_stall=0), options, monitor)
+                                         replace(settings, fallback_stall=0), options, monitor,
+                                         stall_above=fallback_above if fallback else 0.0)
         if info["converged"] or not fallback or info["residual"] <= fallback_above:
             return g, p, act, info
         # full steps of the primal-dual active-set method have no convergence guarantee for a
@@ -432,15 +447,16 @@ def _linesearch_attempts(op, g0, tol, fb_it, max_it, settings, opts, lsopts, mon
     return _after(again[3], _edge_attempts(op, again[0], tol, max_it, settings, opts, monitor))
 
 
-def _edge_attempts(op, g0, tol, max_it, settings, options, monitor):
-    """_ncp_solve, and once more from ``g0`` without the edge term if it stalled on it (ncp_solve)."""
-    g, p, act, info = _ncp_solve(op, g0, tol, max_it, settings, options, monitor)
+def _edge_attempts(op, g0, tol, max_it, settings, options, monitor, stall_above=0.0):
+    """_ncp_solve, and once more from ``g0`` without the edge term if it stalled on it (ncp_solve);
+    ``stall_above``: _Convergence's (a coarse grid's full steps)."""
+    g, p, act, info = _ncp_solve(op, g0, tol, max_it, settings, options, monitor, stall_above)
     if not info.pop("edge_stalled"):
         return g, p, act, info
     # stalled with the edge term (_Convergence._edge_stalled): it can make the contact-set steps'
     # preconditioner indefinite (edge.py); m_CC alone cannot, so the solve starts again from g0
     # without it, and both attempts count
-    again = _ncp_solve(op, g0, tol, max_it, replace(settings, edge_window=0), options, monitor)
+    again = _ncp_solve(op, g0, tol, max_it, replace(settings, edge_window=0), options, monitor, stall_above)
     again[3].pop("edge_stalled")
     return _after(info, again, "edge_retry")
 
@@ -462,7 +478,7 @@ def _is_vi(options):
     return options.get("snes_type", PETSC_DEFAULTS["snes_type"]).startswith("vi")
 
 
-def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
+def _ncp_solve(op, g0, tol, max_it, settings, options, monitor, stall_above=0.0):
     PETSc = petsc()
     options = dict(options or {})
     fft = op.fft
@@ -499,7 +515,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor):
             for step in steps.values():
                 stop.attach(step)
         form = _Semismooth(state, policy, steps, settings, stop)
-    conv = _Convergence(state, policy, tol, monitor, form, settings)
+    conv = _Convergence(state, policy, tol, monitor, form, settings, stall_above)
     _apply_global_options(PETSc, options)
     keys = _apply_options(PETSc, prefix, defaults, options)
     snes = X = Fv = J = None
