@@ -45,8 +45,10 @@ class SolverSettings:
                           "search (vi), or with this PETSc line search on the full steps; a failed search still "
                           "takes its step (none: never) [RESULTS.md]", choices=("vi", "bt", "cp", "l2", "none"))
     vi_step_rtol: float = _knob(1e-5, "Krylov rtol of the VI method's steps, solved on its active set like a "
-                                "contact-set step (vi.py); looser ones need not descend [RESULTS.md]",
-                                lo=0, hi=1, lo_open=True)
+                                "contact-set step (vi.py) [RESULTS.md]", lo=0, hi=1, lo_open=True)
+    vi_step_rtol_max: float = _knob(1e-2, "... with the bt line search, the iterate's measure within "
+                                    "[vi_step_rtol, this] instead, but vi_step_rtol after a loose step bt cut "
+                                    "(at most vi_step_rtol: never) [RESULTS.md]", lo=0, hi=1, lo_open=True)
     vi_stall: int = _knob(20, "... its attempt ends once its measure has not reached a new lowest in this many "
                           "Newton iterations: converging ones went at most 8, a failing one ran 300 (0: never) "
                           "[RESULTS.md]", lo=0)
@@ -283,6 +285,12 @@ class SolverSettings:
             return None
         return self.single_stall_reduction, self.single_stall_window
 
+    def vi_rtol(self, measure):
+        """Krylov rtol of a VI step from an iterate whose convergence measure (operator.py) is ``measure``:
+        the measure itself within [vi_step_rtol, vi_step_rtol_max], so the steps tighten as the
+        iterates converge (forcing proportional to the residual keeps Newton's quadratic end)."""
+        return max(self.vi_step_rtol, min(self.vi_step_rtol_max, float(measure)))
+
     def cycle_cap(self, stiffness_range):
         """The smallest iteration cap whose exhaustion by a changing free-set step starts the cycles
         (StepPolicy.record_iterations) on a grid whose stiffness has the range max|m_q|/min|m_q|: the
@@ -376,7 +384,7 @@ PETSC_DEFAULTS = {
 }
 # -snes_type vinewtonrsls (vi.py): the reduced-space VI Newton method [RESULTS.md]
 PETSC_VI_DEFAULTS = {
-    "ksp_type": "preonly",                    # the PC solves the step (vi.py, SolverSettings.vi_step_rtol)
+    "ksp_type": "preonly",                    # the PC solves the step (vi.py, ViNewton.iterate)
     "snes_vi_zero_tolerance": "1e-12",        # absolute, hence nondimensional unknowns (docs/conventions.md §7)
     "snes_linesearch_type": "basic",
 }

@@ -211,6 +211,8 @@ class _Convergence:
         self.history.append((it, res, st.fft.transforms))
         if self.policy is not None:
             self.policy.record_residual(res)
+        elif isinstance(self.form, ViNewton):
+            self.form.iterate(snes, res)        # its next step's Krylov rtol (vi.py)
         if self.monitor is not None:
             self.monitor(it, res, meas)
         if res <= self.tol:

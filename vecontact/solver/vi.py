@@ -5,10 +5,12 @@ operator.py).  The Jacobian is m (a Python Mat, one FFT pair per product); PETSc
 m_II y = r on the inactive (free) index set I through ``createSubMatrix``, the gap held on the active
 set A (the rest).  That is the Newton system of the default method's contact-set step (contactset.py)
 on A, so the Python PC solves it there: KSP ``preonly``, the PC's inner FGMRES on A (options prefix
-``contact_``) to SolverSettings.vi_step_rtol (1e-5) and ksp_max_it, without the edge term (with it the
-steps of the sharp and SLS rubbers stalled).  A looser step leaves a gap error on A whose pressure on
-I (m_IA) can make the step no descent for the line search (RESULTS.md, "the VI method's steps on the
-contact set").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
+``contact_``) to ksp_max_it and an rtol (ViNewton.iterate): with the bt line search, the iterate's
+convergence measure within [vi_step_rtol, vi_step_rtol_max] (1e-5, 1e-2), and vi_step_rtol after a
+loose step that bt cut; without it, vi_step_rtol.  No edge term: with it the steps of the sharp and
+SLS rubbers stalled.  A loose step leaves a gap error on A whose pressure on I (m_IA) can make the step
+no descent for the line search (RESULTS.md, "the VI method's steps on the contact set" and
+"`vi_step_rtol_max`").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
 ``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
 2x the default's FFT pairs on the paper's rubber but 0.04-0.73x them where the default's full steps
 fail (RESULTS.md); it is kept as an independent second solver of the same problem; option defaults
@@ -38,6 +40,9 @@ class ViNewton:
         self.grid = step.grid                # the sub-matrix products' buffers: the step's (subset.Workspace)
         self._idx = None                     # the inactive set the step was last set to
         self._vecs = None                    # whole-grid right-hand side and update of the step
+        self.rtol = step.settings.vi_step_rtol   # the next step's Krylov rtol (iterate)
+        self._evals = 0                      # residual evaluations since the last iterate
+        self._loose = False                  # the last step was solved looser than vi_step_rtol
 
     def configure(self, snes, X):
         """Python PC and the bounds 0 <= g^ < inf."""
@@ -47,6 +52,20 @@ class ViNewton:
         hi = X.duplicate()
         hi.set(self.PETSc.INFINITY)
         snes.setVariableBounds(lo, hi)
+
+    def iterate(self, snes, measure):
+        """A new iterate, of convergence ``measure`` (snes._Convergence): the next step's rtol.  With the
+        bt line search it is SolverSettings.vi_rtol(measure), loose far from the solution and
+        tightening as the iterates converge, unless bt cut the last step (more than one residual
+        evaluation) after a loose solve: then vi_step_rtol.  A loose step bt cuts points the wrong
+        way, and such steps in a row crawled: the broad rubber at 512^2 took 51 iterations against
+        5 (RESULTS.md, "`vi_step_rtol_max`").  Without a line search that judges the steps (PETSc's
+        basic, the user's VI method's default), vi_step_rtol."""
+        s = self.step.settings
+        cut = self._loose and self._evals > 1
+        judged = snes.getLineSearch().getType() == "bt"
+        self.rtol = s.vi_rtol(measure) if judged and not cut else s.vi_step_rtol
+        self._evals = 0
 
     def linear_iterations(self, snes):
         """The step's Krylov iterations, and the outer KSP's unless it is ``preonly`` (one a step)."""
@@ -66,9 +85,10 @@ class ViNewton:
     def stiffness_inverse(self, idx, x, y):
         """y = (m_II)^-1 x on the inactive set I (local flat ``idx``), the gap held on A (the rest): the
         contact-set step (contactset.py) of the Newton system x_A = 0, (m x)_I = kappa r_I with
-        r_I = x / kappa, to SolverSettings.vi_step_rtol and ksp_max_it.  False (nothing done) when A
-        is empty on every rank.  Collective."""
+        r_I = x / kappa, to ``rtol`` (``iterate``) and ksp_max_it.  False (nothing done) when A is
+        empty on every rank.  Collective."""
         fft = self.state.fft
+        self._loose = False
         act = np.ones(fft.local_real_shape, dtype=bool)
         act.reshape(-1)[idx] = False
         n_act = fft.comm.allreduce(int(np.count_nonzero(act)), op=MPI.SUM)
@@ -84,7 +104,8 @@ class ViNewton:
         if fft.comm.allreduce(changed, op=MPI.LOR):       # set_active is collective
             step.set_active(act, n_act)
             self._idx = idx.copy()
-        step.set_tolerances(step.settings.vi_step_rtol, 0.0, step.settings.ksp_max_it)
+        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it)
+        self._loose = self.rtol > step.settings.vi_step_rtol
         ra = r.getArray()
         ra[:] = 0.0
         ra[idx] = x.getArray(readonly=True) / self.state.kappa
@@ -94,6 +115,7 @@ class ViNewton:
 
     # ------------------------------------------------------------------ SNES callbacks
     def residual(self, snes, X, F):
+        self._evals += 1
         st = self.state
         st.ensure(st.view(X))
         np.copyto(st.view(F, readonly=False), st.p)
