@@ -329,3 +329,52 @@ def test_vi_steps_go_loose_while_the_line_search_takes_them_whole():
     assert loose.fft_pairs < 0.8 * fixed.fft_pairs, (loose.fft_pairs, fixed.fft_pairs)
     _, steps = run(sls, 0.001)
     assert {t for *_, t in steps} == {S.vi_step_rtol}
+
+
+def test_step_precision_by_the_reduction_a_step_must_make():
+    """SolverSettings.step_precision: a float32 basis up to single_exact_reduction_max, mixed pairs in
+    PETSc's operator beyond it up to mixed_reduction_max, float64 beyond both; no float32 basis where
+    it is not allowed (the free set's cycles) or its knob is 0."""
+    S = SolverSettings()
+    assert (S.single_exact_reduction_max, S.mixed_reduction_max) == (1e5, 1e5)
+    assert [S.step_precision(r) for r in (1e2, 1.0 / 1e-5, 1e6)] == [(True, False), (True, False), (False, False)]
+    assert S.step_precision(1e2, float32_basis=False) == (False, True)
+    wide = SolverSettings(single_exact_reduction_max=1e3, mixed_reduction_max=1e6)
+    assert [wide.step_precision(r) for r in (1e3, 1e4, 1e7)] == [(True, False), (False, True), (False, False)]
+    assert SolverSettings(single_exact_reduction_max=0).step_precision(1.0) == (False, True)
+
+
+def test_vi_steps_solve_with_a_float32_basis():
+    """The VI method's steps (vi.py) keep a float32 basis where their pairs are float32 too (the
+    stiffness's range at most single_range_max) and the exact steps' rule allows it for their 1 / rtol
+    (at most 1e5: always, by default); else a float64 FGMRES, as with single_exact_reduction_max 0 or
+    a single_range_max below the range.  The SLS rubber at 1 mm/s on the tests' 64^2 surface, with the
+    bt line search: all three converge to the same contact set and mu (to 1e-8; measured 1e-13 on the
+    SLS 256^2 and 512^2 scans); the diagnostics count the float32-basis iterations (all of them by
+    default, none otherwise)."""
+    from reference.cases import L_PAPER, NU, small_spectrum
+    from reference.dense import random_surface
+    from vecontact.physics.modulus import SLS
+    from vecontact.solver import solve_contact
+    n = 64
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
+    pyfftw.forget_wisdom()
+    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    sls = SLS(3e6, 3e8, 1e-5, NU)
+    sigma0 = 1e-3 * abs(complex(sls(np.array([2 * np.pi / L_PAPER * 8 * 0.001]))[0]))
+
+    def run(*options):
+        r = solve_contact(fft, L_PAPER, h, sls, 0.001, sigma0, store=("pressure",),
+                          petsc_options=["-snes_type", "vinewtonrsls", "-snes_linesearch_type", "bt",
+                                         "-snes_max_fail", "300", *options])
+        assert r.converged and 0.1 < r.area < 0.3
+        return r
+
+    single = run()
+    assert single.diagnostics["single_iterations"] == single.linear_iterations > 0
+    assert single.diagnostics["float32_pairs"]
+    for options in (("-vc_single_exact_reduction_max", "0"), ("-vc_single_range_max", "10")):
+        double = run(*options)
+        assert double.diagnostics["single_iterations"] == 0, options
+        assert np.array_equal(single.pressure > 0, double.pressure > 0)
+        assert abs(single.mu - double.mu) <= 1e-8 * abs(double.mu)

@@ -149,9 +149,7 @@ class StepPolicy:
             self._last = (mode, change, cap)
             reduction = self.mixed_reduction(None)
             # not inside the free set's cycles, whose outer FGMRES keeps its basis in float64
-            self.single = (0 < s.single_exact_reduction_max and reduction <= s.single_exact_reduction_max
-                           and not (self.cycling and mode == "free"))
-            self.mixed = not self.single and reduction <= s.mixed_reduction_max
+            self.single, self.mixed = s.step_precision(reduction, not (self.cycling and mode == "free"))
             return s.exact_rtol, atol, cap
         rtol = s.first_rtol_factor * self.lin_rtol if change < 0 else self.lin_rtol
         cap = min(s.ksp_max_it, self.maxit_changing)

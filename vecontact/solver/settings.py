@@ -133,9 +133,10 @@ class SolverSettings:
     mixed_reduction_max: float = _knob(1e5, "the steps PETSc solves (exact, tightened) form their operator with a "
                                        "float32 backward transform (subset.Mixed) while they must cut their "
                                        "residual by at most this (0: never) [RESULTS.md]", lo=0)
-    single_exact_reduction_max: float = _knob(1e5, "exact steps (not in the free set's cycles) solve with a float32 "
-                                              "basis (single.py, flexible) while they must cut their residual by "
-                                              "at most this (0: never) [RESULTS.md]", lo=0)
+    single_exact_reduction_max: float = _knob(1e5, "exact steps (not in the free set's cycles) and, where float32 "
+                                              "pairs hold, the VI method's solve with a float32 basis (single.py, "
+                                              "flexible) while they must cut their residual by at most this (0: "
+                                              "never) [RESULTS.md]", lo=0)
     single_stall_reduction: float = _knob(1e-4, "a float32-basis step's cycle (single.py) restarts from its float64 "
                                           "residual once its estimate is below this x the cycle's start and "
                                           "stalls (0: never) [RESULTS.md]", lo=0, hi=1)
@@ -284,6 +285,14 @@ class SolverSettings:
         if self.single_stall_reduction == 0:
             return None
         return self.single_stall_reduction, self.single_stall_window
+
+    def step_precision(self, reduction, float32_basis=True):
+        """(single, mixed) of a step that must cut its residual by ``reduction`` (an exact step's, or a VI
+        step's 1 / rtol): a float32 basis (single.py, flexible) while ``float32_basis`` and ``reduction``
+        <= single_exact_reduction_max; else, in PETSc, its operator with mixed pairs while ``reduction``
+        <= mixed_reduction_max: float32 rounding holds such solves near 1e-7 of their start."""
+        single = float32_basis and 0 < self.single_exact_reduction_max and reduction <= self.single_exact_reduction_max
+        return single, not single and reduction <= self.mixed_reduction_max
 
     def vi_rtol(self, measure):
         """Krylov rtol of a VI step from an iterate whose convergence measure (operator.py) is ``measure``:

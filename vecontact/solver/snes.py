@@ -46,7 +46,7 @@ from vecontact.solver.measurestop import MeasureStop
 from vecontact.solver.newton import NewtonState
 from vecontact.solver.policy import StepPolicy, choose_step
 from vecontact.solver.settings import PETSC_DEFAULTS, PETSC_GLOBAL_DEFAULTS, PETSC_VI_DEFAULTS
-from vecontact.solver.subset import Workspace
+from vecontact.solver.subset import Workspace, counters
 from vecontact.solver.vi import ViNewton
 
 __all__ = ["ncp_solve", "petsc", "hold_comm", "check_options", "POLICY_OFF"]
@@ -171,11 +171,7 @@ class _Semismooth:
         """Active-set changes, linear iterations before each step (and at the end), step-mode switches."""
         return dict(nchg=self.policy.changes, lin_history=self.lin_history + [linear_iterations], modes=self.modes,
                     measure_checks=self.stop.trace if self.stop is not None else [],
-                    single_iterations=sum(s.single_iterations for s in self.steps.values()),
-                    float32_pairs=any(s.ran_float32_pairs for s in self.steps.values()),
-                    mixed_pairs=sum(s.mixed_pairs for s in self.steps.values()),
-                    carried_directions=sum(s.carried_directions for s in self.steps.values()),
-                    stalls=sum(s.stalls for s in self.steps.values()), smoothed_steps=self.smoothed)
+                    smoothed_steps=self.smoothed, **counters(self.steps.values()))
 
     def release(self):
         for step in self.steps.values():

@@ -17,7 +17,7 @@ from vecontact.solver.carry import CarriedDirections
 from vecontact.solver.recycle import CarriedSpace
 from vecontact.solver.single import SingleGMRES
 
-__all__ = ["Grid", "Mixed", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "gather"]
+__all__ = ["Grid", "Mixed", "Restricted", "SingleCycles", "SubsetStep", "Workspace", "counters", "gather"]
 
 
 def gather(full, idx, out):
@@ -269,6 +269,17 @@ class Workspace:
         return self._s
 
 
+def counters(steps):
+    """The precision and carry counts of the inner solves of ``steps`` (SubsetSteps), for a solve's
+    diagnostics."""
+    steps = list(steps)
+    return dict(single_iterations=sum(s.single_iterations for s in steps),
+                float32_pairs=any(s.ran_float32_pairs for s in steps),
+                mixed_pairs=sum(s.mixed_pairs for s in steps),
+                carried_directions=sum(s.carried_directions for s in steps),
+                stalls=sum(s.stalls for s in steps))
+
+
 class SubsetStep:
     """Base of the Newton-step PCs: the inner KSP on the points ``idx`` of S, its restricted operator,
     the option defaults it puts into PETSc's database (removed again by ``release``) and the count of
@@ -506,11 +517,16 @@ class SubsetStep:
         operator, runs float32 pairs: the stiffness's range at most SolverSettings.pc_range_max."""
         return self.op.stiffness_range() <= self.settings.pc_range_max
 
+    def float32_pairs_hold(self):
+        """Whether a float32-basis solve runs float32 pairs too: the stiffness's range at most
+        SolverSettings.single_range_max."""
+        return self.op.stiffness_range() <= self.settings.single_range_max
+
     def single_context(self):
         """The step's _Single (made on first use; its pairs in float32 by the stiffness's range, and on
         the contact set, whose float32 steps are flexible, its preconditioner's by float32_pc)."""
         if self._single is None:
-            self.float32_pairs = self.op.stiffness_range() <= self.settings.single_range_max
+            self.float32_pairs = self.float32_pairs_hold()
             self._single = _Single(self, self.float32_pairs, self.mode == "contact" and self.float32_pc())
         return self._single
 

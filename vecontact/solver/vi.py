@@ -8,8 +8,11 @@ on A, so the Python PC solves it there: KSP ``preonly``, the PC's inner FGMRES o
 ``contact_``) to ksp_max_it and an rtol (ViNewton.iterate): with the bt line search, the iterate's
 convergence measure within [vi_step_rtol, vi_step_rtol_max] (1e-5, 1e-2), and vi_step_rtol after a
 loose step that bt cut; without it, vi_step_rtol.  No edge term: with it the steps of the sharp and
-SLS rubbers stalled.  A loose step leaves a gap error on A whose pressure on I (m_IA) can make the step
-no descent for the line search (RESULTS.md, "the VI method's steps on the contact set" and
+SLS rubbers stalled.  The FGMRES keeps a float32 basis (single.py) where its pairs are float32 too
+(SubsetStep.float32_pairs_hold) and SolverSettings.step_precision of 1 / rtol allows it: its
+orthogonalisation, not its pairs, was half of a long step's time in float64 [RESULTS.md].  A loose
+step leaves a gap error on A whose pressure on I (m_IA) can make the step no descent for the line
+search (RESULTS.md, "the VI method's steps on the contact set" and
 "`vi_step_rtol_max`").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
 ``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
 2x the default's FFT pairs on the paper's rubber but 0.04-0.73x them where the default's full steps
@@ -24,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from vecontact.solver.subset import gather
+from vecontact.solver.subset import counters, gather
 
 __all__ = ["ViNewton"]
 
@@ -73,8 +76,8 @@ class ViNewton:
         return outer + self.step.iterations
 
     def diagnostics(self, linear_iterations):
-        """No active set of ours and one kind of step: nothing but the linear iterations."""
-        return dict(nchg=[], lin_history=[linear_iterations], modes=[])
+        """No active set of ours and one kind of step: the linear iterations and the step's counts."""
+        return dict(nchg=[], lin_history=[linear_iterations], modes=[], **counters([self.step]))
 
     def release(self):
         self.step.release()
@@ -104,7 +107,10 @@ class ViNewton:
         if fft.comm.allreduce(changed, op=MPI.LOR):       # set_active is collective
             step.set_active(act, n_act)
             self._idx = idx.copy()
-        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it)
+        # a float32 basis only with float32 pairs: with float64 ones (the sharp rubber at 2048^2) its
+        # tight steps took 2-3x the iterations [RESULTS.md]
+        single = step.float32_pairs_hold() and step.settings.step_precision(1.0 / self.rtol)[0]
+        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it, single=single)
         self._loose = self.rtol > step.settings.vi_step_rtol
         ra = r.getArray()
         ra[:] = 0.0
