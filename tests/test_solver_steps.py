@@ -274,6 +274,30 @@ def test_the_vi_steps_tighten_with_the_measure():
     assert [fixed.vi_rtol(m) for m in (np.inf, 1e-3, 1e-9)] == [1e-6] * 3
 
 
+_VI_BT = ["-snes_linesearch_type", "bt", "-snes_max_fail", "300"]      # the fallback's line search
+
+
+def _vi_case():
+    """The VI tests' 64^2 surface (the reference cases' spectrum, seed 4) and its SlabFFT; the paths
+    round with the FFT plans: the estimate planner's, not wisdom that earlier tests loaded."""
+    from reference.cases import L_PAPER, small_spectrum
+    from reference.dense import random_surface
+    n = 64
+    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
+    pyfftw.forget_wisdom()
+    return SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False), h
+
+
+def _vi_solve(fft, h, mod, v, *options, **kwargs):
+    """PETSc's VI method with ``options`` on ``_vi_case``'s surface at sigma0 = 1e-3 |E(8 q0 v)|,
+    the pressure stored."""
+    from reference.cases import L_PAPER
+    from vecontact.solver import solve_contact
+    sigma0 = 1e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * v]))[0]))
+    return solve_contact(fft, L_PAPER, h, mod, v, sigma0, store=("pressure",),
+                         petsc_options=["-snes_type", "vinewtonrsls", *options], **kwargs)
+
+
 def test_vi_steps_go_loose_while_the_line_search_takes_them_whole():
     """PETSc's VI method with the bt line search on the tests' 64^2 surface.  ViNewton.iterate, at each
     iterate (its measure the monitor's): the next step's rtol is SolverSettings.vi_rtol of the
@@ -282,16 +306,10 @@ def test_vi_steps_go_loose_while_the_line_search_takes_them_whole():
     1 mm/s (loss angle up to 79 deg, 18 % in contact) converges to the same contact set and mu as
     with every step at 1e-5, in fewer FFT pairs (measured 474 against 752).  With PETSc's basic line
     search (the VI method's default), which judges no step, every step is at vi_step_rtol."""
-    from reference.cases import L_PAPER, NU, small_spectrum
-    from reference.dense import random_surface
+    from reference.cases import NU
     from vecontact.physics.modulus import SLS, HavriliakNegami
-    from vecontact.solver import solve_contact
     from vecontact.solver.vi import ViNewton
-    n = 64
-    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
-    # the paths round with the FFT plans: the estimate planner's, not wisdom that earlier tests loaded
-    pyfftw.forget_wisdom()
-    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    fft, h = _vi_case()
     S = SolverSettings()
     iterate = ViNewton.iterate
     log = []
@@ -304,25 +322,21 @@ def test_vi_steps_go_loose_while_the_line_search_takes_them_whole():
     def run(mod, v, *options):
         log.clear()
         seen = []
-        sigma0 = 1e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * v]))[0]))
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(ViNewton, "iterate", spy)
-            r = solve_contact(fft, L_PAPER, h, mod, v, sigma0, store=("pressure",),
-                              petsc_options=["-snes_type", "vinewtonrsls", *options],
-                              monitor=lambda N, it, m: seen.append(m))
+            r = _vi_solve(fft, h, mod, v, *options, monitor=lambda N, it, m: seen.append(m))
         assert r.converged and 0.1 < r.area < 0.3
         assert [m for m, *_ in log] == seen and len(seen) == r.iterations + 1
         return r, list(log)
 
-    bt = ["-snes_linesearch_type", "bt", "-snes_max_fail", "300"]
-    _, steps = run(HavriliakNegami(3e6, 3e10, 0.5, 0.5, 1e-10, NU), 30.0, *bt)
+    _, steps = run(HavriliakNegami(3e6, 3e10, 0.5, 0.5, 1e-10, NU), 30.0, *_VI_BT)
     cut = [loose and evals > 1 for _, loose, evals, _ in steps]
     assert [t for *_, t in steps] == [S.vi_step_rtol if k else S.vi_rtol(m) for (m, *_), k in zip(steps, cut)]
     assert any(cut) and steps[0][-1] == S.vi_step_rtol_max
     sls = SLS(3e6, 3e8, 1e-5, NU)
-    loose, steps = run(sls, 0.001, *bt)
+    loose, steps = run(sls, 0.001, *_VI_BT)
     assert steps[0][-1] == S.vi_step_rtol_max
-    fixed, steps = run(sls, 0.001, *bt, "-vc_vi_step_rtol_max", str(S.vi_step_rtol))
+    fixed, steps = run(sls, 0.001, *_VI_BT, "-vc_vi_step_rtol_max", str(S.vi_step_rtol))
     assert {t for *_, t in steps} == {S.vi_step_rtol}
     assert np.array_equal(loose.pressure > 0, fixed.pressure > 0)
     assert abs(loose.mu - fixed.mu) <= 1e-8 * abs(fixed.mu)
@@ -352,21 +366,13 @@ def test_vi_steps_solve_with_a_float32_basis():
     bt line search: all three converge to the same contact set and mu (to 1e-8; measured 1e-13 on the
     SLS 256^2 and 512^2 scans); the diagnostics count the float32-basis iterations (all of them by
     default, none otherwise)."""
-    from reference.cases import L_PAPER, NU, small_spectrum
-    from reference.dense import random_surface
+    from reference.cases import NU
     from vecontact.physics.modulus import SLS
-    from vecontact.solver import solve_contact
-    n = 64
-    h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
-    pyfftw.forget_wisdom()
-    fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
+    fft, h = _vi_case()
     sls = SLS(3e6, 3e8, 1e-5, NU)
-    sigma0 = 1e-3 * abs(complex(sls(np.array([2 * np.pi / L_PAPER * 8 * 0.001]))[0]))
 
     def run(*options):
-        r = solve_contact(fft, L_PAPER, h, sls, 0.001, sigma0, store=("pressure",),
-                          petsc_options=["-snes_type", "vinewtonrsls", "-snes_linesearch_type", "bt",
-                                         "-snes_max_fail", "300", *options])
+        r = _vi_solve(fft, h, sls, 0.001, *_VI_BT, *options)
         assert r.converged and 0.1 < r.area < 0.3
         return r
 

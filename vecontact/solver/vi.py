@@ -12,9 +12,9 @@ SLS rubbers stalled.  The FGMRES keeps a float32 basis (single.py) where its pai
 (SubsetStep.float32_pairs_hold) and SolverSettings.step_precision of 1 / rtol allows it: its
 orthogonalisation, not its pairs, was half of a long step's time in float64 [RESULTS.md].  A loose
 step leaves a gap error on A whose pressure on I (m_IA) can make the step no descent for the line
-search (RESULTS.md, "the VI method's steps on the contact set" and
-"`vi_step_rtol_max`").  With A empty the PC is the compliance c (m's inverse on the whole grid).  A user's
-``-ksp_type`` (say ``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
+search (RESULTS.md, "the VI method's steps on the contact set" and "`vi_step_rtol_max`").  With A
+empty the PC is the compliance c (m's inverse on the whole grid).  A user's ``-ksp_type`` (say
+``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
 2x the default's FFT pairs on the paper's rubber but 0.04-0.73x them where the default's full steps
 fail (RESULTS.md); it is kept as an independent second solver of the same problem; option defaults
 in settings.PETSC_VI_DEFAULTS.  With the bt line search it is also the fallback of a solve whose full
