@@ -358,6 +358,68 @@ def test_step_precision_by_the_reduction_a_step_must_make():
     assert SolverSettings(single_exact_reduction_max=0).step_precision(1.0) == (False, True)
 
 
+def test_vi_step_after_one_that_ran_out_keeps_a_longer_basis(monkeypatch):
+    """A VI step whose FGMRES used all of ksp_max_it short of its rtol is followed by one with the restart
+    vi_capped_restart instead of inner_restart_max (restarted FGMRES stagnated on such steps: a 512^2
+    SLS case took 70 272 pairs in them, RESULTS.md); a step after one that converged goes back.  The
+    SLS rubber at 1 mm/s on the tests' 64^2 surface with the bt line search, caps small enough that
+    steps run out (ksp_max_it 40, inner_restart_max 12, vi_capped_restart 40): the restart of every
+    step follows the rule, with the float32 basis (single.py) and in PETSc's float64 FGMRES
+    (single_range_max below the range), and the answers are the default's (contact set, mu to 1e-8).
+    With -contact_ksp_gmres_restart the user's restart holds."""
+    from reference.cases import NU
+    from vecontact.physics.modulus import SLS
+    from vecontact.solver import single
+    from vecontact.solver.vi import ViNewton
+    # the longer basis stays within the Krylov memory the farm counts (farm.memory): 400 on a 512^2
+    # rank where the active set is small, less where it is large, never below inner_restart_max's
+    S, n = SolverSettings(), 512 * 512
+    for n_active in (n // 20, n // 4, n // 2, 7 * n // 10):
+        restart = S.vi_restart(512, n, n_active)
+        assert S.inner_restart(n_active) <= restart <= S.vi_capped_restart
+        assert restart == S.inner_restart(n_active) or 2 * 8 * (restart + 1) * n_active <= S.krylov_bytes(512, n)
+    assert S.vi_restart(512, n, n // 20) == S.vi_capped_restart
+    assert S.vi_restart(512, n, 7 * n // 10) == S.inner_restart(7 * n // 10)
+    assert SolverSettings(vi_capped_restart=0).vi_restart(512, n, n // 20) == S.inner_restart(n // 20)
+    fft, h = _vi_case()
+    sls = SLS(3e6, 3e8, 1e-5, NU)
+    default = _vi_solve(fft, h, sls, 0.001, *_VI_BT)
+    caps = ("-vc_ksp_max_it", "40", "-vc_inner_restart_max", "12", "-vc_vi_capped_restart", "40")
+    made = []
+    init, inverse = single.SingleGMRES.__init__, ViNewton.stiffness_inverse
+
+    def spy_init(self, n_loc, restart, *args, **kwargs):
+        made.append(restart)
+        init(self, n_loc, restart, *args, **kwargs)
+
+    def run(*options):
+        steps = []
+
+        def spy_inverse(self, idx, x, y):
+            its, n = self.step.iterations, len(made)
+            done = inverse(self, idx, x, y)
+            if done:
+                steps.append((self.step.iterations - its, made[n:] or [self.petsc_restart or 12]))
+            return done
+
+        monkeypatch.setattr(ViNewton, "stiffness_inverse", spy_inverse)
+        r = _vi_solve(fft, h, sls, 0.001, *_VI_BT, *caps, *options)
+        assert r.converged and 0.1 < r.area < 0.3
+        assert np.array_equal(r.pressure > 0, default.pressure > 0)
+        assert abs(r.mu - default.mu) <= 1e-8 * abs(default.mu)
+        ran_out = [its >= 40 for its, _ in steps]
+        assert any(ran_out[:-1]) and not all(ran_out), options
+        return [restart for _, restart in steps], [False] + ran_out[:-1]
+
+    monkeypatch.setattr(single.SingleGMRES, "__init__", spy_init)
+    for options in ((), ("-vc_single_range_max", "10")):
+        restarts, after = run(*options)
+        assert restarts == [[40 if out else 12] for out in after], options
+    # the user's restart: never replaced (the spy's 12 is "not set")
+    restarts, _ = run("-vc_single_range_max", "10", "-contact_ksp_gmres_restart", "15")
+    assert {r for r, in restarts} == {12}
+
+
 def test_vi_steps_solve_with_a_float32_basis():
     """The VI method's steps (vi.py) keep a float32 basis where their pairs are float32 too (the
     stiffness's range at most single_range_max) and the exact steps' rule allows it for their 1 / rtol

@@ -33,18 +33,16 @@ def case_bytes(N, g, settings=None):
     """Peak bytes per rank of an N x N case on ``g`` ranks: the arrays, and the largest Krylov basis the
     ``settings``' restart rules give a step: a free-set GMRES over all of a rank's points, or the
     contact-set steps' inner FGMRES (two vectors an iteration) over the largest contact set solved on
-    (SolverSettings.widest_step_area of an N x N grid; all points with contact_step "contact").  That
-    is their budgets (3 GB a rank by default), less where the restart caps bind, more where
-    ``restart_min`` does.  Plus the kernel of
+    (SolverSettings.widest_step_area of an N x N grid; all points with contact_step "contact"):
+    SolverSettings.krylov_bytes.  That is their budgets (3 GB a rank by default), less where the
+    restart caps bind, more where ``restart_min`` does; the VI steps' longer restart
+    (vi_capped_restart) stays within it.  Plus the kernel of
     the contact-set steps' map of carried directions (recycle.py), N^2 float32 on every rank whatever
     ``g``, where it is made (within half of carry_memory)."""
     s = SolverSettings() if settings is None else settings
     n = float(N) * float(N) / max(1, int(g))
-    n_contact = {"contact": 1.0, "free": 0.0}.get(s.contact_step, s.widest_step_area(N)) * n
-    free = (s.restart(n) + 1) * n
-    inner = 2 * (s.inner_restart(n_contact) + 1) * n_contact
     kernel = ComplianceKernel.bytes(N) if ComplianceKernel.fits(N, s) else 0.0
-    return BYTES_PER_POINT * n + KRYLOV_PEAK * 8.0 * max(free, inner) + kernel
+    return BYTES_PER_POINT * n + KRYLOV_PEAK * s.krylov_bytes(N, n) + kernel
 
 
 def fits(N, g, memory, settings=None):

@@ -52,6 +52,10 @@ class SolverSettings:
     vi_stall: int = _knob(20, "... its attempt ends once its measure has not reached a new lowest in this many "
                           "Newton iterations: converging ones went at most 8, a failing one ran 300 (0: never) "
                           "[RESULTS.md]", lo=0)
+    vi_capped_restart: int = _knob(400, "... the FGMRES restart of a VI step after one that used all of ksp_max_it short "
+                                   "of its rtol (restarted FGMRES stagnates there; inner_restart_max otherwise; "
+                                   "within the Krylov memory farm.memory counts, vi_restart; 0: never) "
+                                   "[RESULTS.md]", lo=0)
     fallback_max_it: int = _knob(300, "Newton iterations of the fallback's attempt (numerics.max_iterations "
                                  "wins): bt's measure falls by a few % an iteration [RESULTS.md]", lo=1)
     fallback_coarse: str = _knob("on", "on: a coarse grid whose full steps end unconverged at coarse_max_it "
@@ -325,6 +329,24 @@ class SolverSettings:
             return gmres_restart(n_local, self.inner_restart_memory, vectors, self.inner_restart_max,
                                  self.restart_min)
         return self.restart(n_local, vectors, reserve / 2)
+
+    def krylov_bytes(self, N, n_local):
+        """Bytes of a rank's largest Krylov basis by the restart rules on an N x N grid, ``n_local`` its
+        points (farm.memory counts it): the free-set GMRES over all of them, or the contact-set steps'
+        inner FGMRES (two vectors an iteration) over the widest set they solve on (widest_step_area;
+        all points with contact_step "contact")."""
+        n = float(n_local)
+        n_contact = {"contact": 1.0, "free": 0.0}.get(self.contact_step, self.widest_step_area(N)) * n
+        return 8.0 * max((self.restart(n) + 1) * n, 2 * (self.inner_restart(n_contact) + 1) * n_contact)
+
+    def vi_restart(self, N, n_local, n_active):
+        """FGMRES restart of a VI step after one that ran out of ksp_max_it (vi.py), on ``n_active`` of a
+        rank's ``n_local`` points of an N x N grid: vi_capped_restart within inner_restart_memory and
+        krylov_bytes(N, n_local), so that the farm's memory estimate holds, and never below
+        inner_restart(n_active); that where vi_capped_restart is 0."""
+        budget = min(self.inner_restart_memory, self.krylov_bytes(N, n_local))
+        longer = gmres_restart(n_active, budget, 2, self.vi_capped_restart, self.restart_min)
+        return max(self.inner_restart(n_active), longer if self.vi_capped_restart else 0)
 
     def inner_restart(self, n_local):
         """FGMRES restart of the inner solve of the contact-set steps (n_local: local contact points)."""

@@ -498,10 +498,14 @@ class SubsetStep:
             self._mixed_grid = Mixed(self.grid, self.work.float32_grid(), self)
         return self._mixed_grid
 
+    def own_option(self, name):
+        """Whether the inner KSP's option ``name`` (without prefix) is vecontact's default, not the user's."""
+        return self._prefix + name in self._own_keys
+
     def own_krylov(self):
         """Whether the inner KSP's type is vecontact's default, not one the user chose (-ksp_type /
         -contact_ksp_type): only then may its solves change method or precision."""
-        return self._prefix + "ksp_type" in self._own_keys
+        return self.own_option("ksp_type")
 
     def step_pc(self):
         """The inner KSP's Python PC: preconditioner() (ContactSetStep: in float32 where it may be)."""
@@ -562,7 +566,7 @@ class SubsetStep:
             flexible_restart = self.settings.single_restart(n_loc, self.mode, fgmres_vectors)
             own = flexible_restart if self.flexible else self.settings.single_restart(n_loc, self.mode, 0.5)
             restart = self.comm.allreduce(own, op=MPI.MIN)
-            if self._prefix + "ksp_gmres_restart" not in self._own_keys:      # the user's restart
+            if not self.own_option("ksp_gmres_restart"):      # the user's restart
                 restart = self.PETSc.Options().getInt(self._prefix + "ksp_gmres_restart")
             if space is not None and not self._unchanged:
                 space = self.map_space(space)

@@ -10,9 +10,11 @@ convergence measure within [vi_step_rtol, vi_step_rtol_max] (1e-5, 1e-2), and vi
 loose step that bt cut; without it, vi_step_rtol.  No edge term: with it the steps of the sharp and
 SLS rubbers stalled.  The FGMRES keeps a float32 basis (single.py) where its pairs are float32 too
 (SubsetStep.float32_pairs_hold) and SolverSettings.step_precision of 1 / rtol allows it: its
-orthogonalisation, not its pairs, was half of a long step's time in float64 [RESULTS.md].  A loose
-step leaves a gap error on A whose pressure on I (m_IA) can make the step no descent for the line
-search (RESULTS.md, "the VI method's steps on the contact set" and "`vi_step_rtol_max`").  With A
+orthogonalisation, not its pairs, was half of a long step's time in float64 [RESULTS.md].  A step
+after one that used all of ksp_max_it restarts every vi_capped_restart iterations instead of
+inner_restart_max: restarted FGMRES had stagnated in such steps one after the other [RESULTS.md].
+A loose step leaves a gap error on A whose pressure on I (m_IA) can make the step no descent for the
+line search (RESULTS.md, "the VI method's steps on the contact set" and "`vi_step_rtol_max`").  With A
 empty the PC is the compliance c (m's inverse on the whole grid).  A user's ``-ksp_type`` (say
 ``fgmres``) runs on I with this PC.  As a whole solve (with bt) it takes about
 2x the default's FFT pairs on the paper's rubber but 0.04-0.73x them where the default's full steps
@@ -23,6 +25,8 @@ steps cannot converge, and of the grids finer than one whose full steps failed (
 removed: it did not converge with the compliance preconditioner.
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from mpi4py import MPI
@@ -46,6 +50,9 @@ class ViNewton:
         self.rtol = step.settings.vi_step_rtol   # the next step's Krylov rtol (iterate)
         self._evals = 0                      # residual evaluations since the last iterate
         self._loose = False                  # the last step was solved looser than vi_step_rtol
+        self._settings = step.settings
+        self._capped = False                 # the last step used all of ksp_max_it
+        self.petsc_restart = None            # the restart set on the step's PETSc FGMRES (_petsc_restart)
 
     def configure(self, snes, X):
         """Python PC and the bounds 0 <= g^ < inf."""
@@ -110,14 +117,40 @@ class ViNewton:
         # a float32 basis only with float32 pairs: with float64 ones (the sharp rubber at 2048^2) its
         # tight steps took 2-3x the iterations [RESULTS.md]
         single = step.float32_pairs_hold() and step.settings.step_precision(1.0 / self.rtol)[0]
-        step.set_tolerances(self.rtol, 0.0, step.settings.ksp_max_it, single=single)
+        # restarted FGMRES can stagnate on these sets: after a step that ran out of iterations, the next
+        # one keeps a longer basis (single.py reads it from the settings, PETSc's KSP is told)
+        step.settings = self._settings
+        if self._capped:
+            st = self._settings
+            restart = st.vi_restart(fft.N, int(np.prod(fft.local_real_shape)), step.idx.size)
+            step.settings = replace(st, inner_restart_max=restart)
+        max_it = step.settings.ksp_max_it
+        step.set_tolerances(self.rtol, 0.0, max_it, single=single)
+        if not step.single:
+            self._petsc_restart(step, step.idx.size)
         self._loose = self.rtol > step.settings.vi_step_rtol
         ra = r.getArray()
         ra[:] = 0.0
         ra[idx] = x.getArray(readonly=True) / self.state.kappa
+        its = step.iterations
         step.apply(None, r, out)
+        self._capped = step.iterations - its >= max_it
         gather(out.getArray(readonly=True), idx, y.getArray())
         return True
+
+    def _petsc_restart(self, step, n_loc):
+        """The restart of the step's PETSc FGMRES: the one configured (inner_restart_max's) or, after a
+        step that ran out, vi_capped_restart within inner_restart_memory (``petsc_restart``: the one
+        set last, None before any); the user's -contact_ksp_gmres_restart always.
+        Set only when it changes (PETSc frees the basis then)."""
+        if not step.own_option("ksp_gmres_restart"):
+            return
+        configured = self.PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
+        restart = (step.comm.allreduce(step.settings.inner_restart(n_loc), op=MPI.MIN) if self._capped
+                   else configured)
+        if restart != (self.petsc_restart or configured):
+            step.ksp.setGMRESRestart(restart)
+            self.petsc_restart = restart
 
     # ------------------------------------------------------------------ SNES callbacks
     def residual(self, snes, X, F):
