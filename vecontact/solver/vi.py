@@ -140,8 +140,8 @@ class ViNewton:
 
     def _petsc_restart(self, step, n_loc):
         """The restart of the step's PETSc FGMRES: the one configured (inner_restart_max's) or, after a
-        step that ran out, vi_capped_restart within inner_restart_memory (``petsc_restart``: the one
-        set last, None before any); the user's -contact_ksp_gmres_restart always.
+        step that ran out, SolverSettings.vi_restart's (``petsc_restart``: the one set last, None
+        before any); the user's -contact_ksp_gmres_restart always.
         Set only when it changes (PETSc frees the basis then)."""
         if not step.own_option("ksp_gmres_restart"):
             return
