@@ -51,7 +51,7 @@ class ViNewton:
         self._evals = 0                      # residual evaluations since the last iterate
         self._loose = False                  # the last step was solved looser than vi_step_rtol
         self._settings = step.settings
-        self._capped = False                 # the last step used all of ksp_max_it
+        self._capped = False                 # the last step used all of ksp_max_it (a longer restart next)
         self.petsc_restart = None            # the restart set on the step's PETSc FGMRES (_petsc_restart)
 
     def configure(self, snes, X):
@@ -114,39 +114,38 @@ class ViNewton:
         if fft.comm.allreduce(changed, op=MPI.LOR):       # set_active is collective
             step.set_active(act, n_act)
             self._idx = idx.copy()
+        # restarted FGMRES can stagnate on these sets: after a step that ran out of iterations, the next
+        # one keeps a longer basis (single.py reads it from the settings, PETSc's KSP is told); never a
+        # shorter one than the others', and with vi_capped_restart 0 the settings as they are
+        st = self._settings
+        longer = self._capped and st.vi_capped_restart > 0
+        step.settings = (replace(st, inner_restart_max=max(st.inner_restart_max, st.vi_restart(
+            fft.N, int(np.prod(fft.local_real_shape)), step.idx.size))) if longer else st)
         # a float32 basis only with float32 pairs: with float64 ones (the sharp rubber at 2048^2) its
         # tight steps took 2-3x the iterations [RESULTS.md]
-        single = step.float32_pairs_hold() and step.settings.step_precision(1.0 / self.rtol)[0]
-        # restarted FGMRES can stagnate on these sets: after a step that ran out of iterations, the next
-        # one keeps a longer basis (single.py reads it from the settings, PETSc's KSP is told)
-        step.settings = self._settings
-        if self._capped:
-            st = self._settings
-            restart = st.vi_restart(fft.N, int(np.prod(fft.local_real_shape)), step.idx.size)
-            step.settings = replace(st, inner_restart_max=restart)
-        max_it = step.settings.ksp_max_it
-        step.set_tolerances(self.rtol, 0.0, max_it, single=single)
+        single = step.float32_pairs_hold() and st.step_precision(1.0 / self.rtol)[0]
+        step.set_tolerances(self.rtol, 0.0, st.ksp_max_it, single=single)
         if not step.single:
-            self._petsc_restart(step, step.idx.size)
+            self._petsc_restart(step, longer)
         self._loose = self.rtol > step.settings.vi_step_rtol
         ra = r.getArray()
         ra[:] = 0.0
         ra[idx] = x.getArray(readonly=True) / self.state.kappa
         its = step.iterations
         step.apply(None, r, out)
-        self._capped = step.iterations - its >= max_it
+        self._capped = step.iterations - its >= st.ksp_max_it
         gather(out.getArray(readonly=True), idx, y.getArray())
         return True
 
-    def _petsc_restart(self, step, n_loc):
-        """The restart of the step's PETSc FGMRES: the one configured (inner_restart_max's) or, after a
-        step that ran out, SolverSettings.vi_restart's (``petsc_restart``: the one set last, None
-        before any); the user's -contact_ksp_gmres_restart always.
-        Set only when it changes (PETSc frees the basis then)."""
+    def _petsc_restart(self, step, longer):
+        """The restart of the step's PETSc FGMRES: the one configured (inner_restart_max's) or, for a
+        ``longer`` one after a step that ran out, the step's settings' (SolverSettings.vi_restart;
+        ``petsc_restart``: the one set last, None before any); the user's -contact_ksp_gmres_restart
+        always.  Set only when it changes (PETSc frees the basis then)."""
         if not step.own_option("ksp_gmres_restart"):
             return
         configured = self.PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
-        restart = (step.comm.allreduce(step.settings.inner_restart(n_loc), op=MPI.MIN) if self._capped
+        restart = (step.comm.allreduce(step.settings.inner_restart(step.idx.size), op=MPI.MIN) if longer
                    else configured)
         if restart != (self.petsc_restart or configured):
             step.ksp.setGMRESRestart(restart)
