@@ -161,6 +161,16 @@ def test_wandering_tightens_down_to_the_floors():
     assert all(a >= b for a, b in zip(rtols, rtols[1:])) and all(a <= b for a, b in zip(caps, caps[1:]))
 
 
+def test_changing_cap_grows_above_the_measured_grids():
+    """The changing steps' cap: lin_maxit_changing up to lin_maxit_n (2048), then x lin_maxit_growth
+    (1.4) per doubling of N; tightening doubles the grid's own cap."""
+    assert [S.maxit_changing(n) for n in (0, 64, 512, 2048, 4096, 8192)] == [40, 40, 40, 40, 56, 78]
+    assert SolverSettings(lin_maxit_growth=2.0, lin_maxit_n=512).maxit_changing(2048) == 160
+    for n, caps in ((2048, [40, 40, 80]), (4096, [56, 56, 112])):
+        got = _run(StepPolicy(S, 1.0, n=n), [(1.0, -1, "free"), (2.0, 500, "free"), (0.5, 400, "contact")])
+        assert [t[2] for t in got] == caps
+
+
 def test_stalled_residual_tightens():
     p = StepPolicy(S, 1.0)
     got = _run(p, [(1.0, -1, "free"), (0.1, 500, "free"), (0.2, 10, "free")])

@@ -8,7 +8,7 @@ SolverSettings fields (settings.py); what they were measured on is in benchmarks
 Tolerances (rtol, atol, max_it) of a step's Krylov solve:
 
 * the first step of a grid level (change -1) decides the set the others refine: first_rtol_factor x
-  lin_rtol, at most lin_maxit_changing iterations;
+  lin_rtol, at most lin_maxit_changing iterations (more above lin_maxit_n: SolverSettings.maxit_changing);
 * while the active set changes: lin_rtol, at most lin_maxit_changing iterations, both tightened
   (x tighten_factor down to lin_rtol_min, x tighten_maxit_factor up to ksp_max_it) whenever
   ``tighten_steps`` says the steps make too little progress;
@@ -79,18 +79,19 @@ class StepPolicy:
     ``atol``: the absolute tolerance of an exact free-set step (tol / kappa, h_rms units); ``own``: False
     when the user's PETSc options (-ksp_rtol, -snes_ksp_ew, ...) decide the tolerances instead;
     ``stiffness_range``: max|m_q|/min|m_q| of the grid (ContactOperator.stiffness_range), which sets
-    when the free-set steps start their cycles.
+    when the free-set steps start their cycles; ``n``: the grid's N, which sets the changing steps'
+    iteration cap (SolverSettings.maxit_changing; 0: lin_maxit_changing).
     ``changes`` and ``residuals`` keep the history the rules read (and the solver reports).
     """
 
-    def __init__(self, settings, atol, own=True, tol=None, stiffness_range=0.0):
+    def __init__(self, settings, atol, own=True, tol=None, stiffness_range=0.0, n=0):
         self.settings = settings
         self.cycle_cap = settings.cycle_cap(stiffness_range)   # record_iterations
         self.tol = tol             # the solve's convergence tolerance (mixed: None, never)
         self.own = own
         self.lin_rtol = settings.lin_rtol
         self.atol = atol
-        self.maxit_changing = settings.lin_maxit_changing
+        self.maxit_changing = settings.maxit_changing(n)
         self.changes = []
         self.residuals = []
         self.single = False        # the latest step solves in single precision (single.py)

@@ -84,6 +84,10 @@ class SolverSettings:
                               lo=0, hi=1, lo_open=True)
     lin_maxit_changing: int = _knob(40, "Krylov iteration cap of a step whose active set changed [RESULTS.md]",
                                     lo=1)
+    lin_maxit_growth: float = _knob(1.4, "... times this per doubling of N above lin_maxit_n (the oracle solve's "
+                                    "growth per doubling, #15) [RESULTS.md]", lo=1)
+    lin_maxit_n: int = _knob(2048, "the largest N whose changing steps' cap is lin_maxit_changing itself (the grids "
+                             "it was measured on) [RESULTS.md]", lo=1)
     ksp_max_it: int = _knob(400, "Krylov iteration cap of any Newton step (and of the VI steps)", lo=1)
     wander_ratio: float = _knob(0.3, "set changes shrinking < 1/this per step: tighten [RESULTS.md]",
                                 lo=0, lo_open=True)
@@ -303,6 +307,16 @@ class SolverSettings:
         the measure itself within [vi_step_rtol, vi_step_rtol_max], so the steps tighten as the
         iterates converge (forcing proportional to the residual keeps Newton's quadratic end)."""
         return max(self.vi_step_rtol, min(self.vi_step_rtol_max, float(measure)))
+
+    def maxit_changing(self, n):
+        """Krylov iteration cap of a changing Newton step on an n x n grid: lin_maxit_changing up to
+        lin_maxit_n, then x lin_maxit_growth per doubling.  The Krylov iterations a step needs grow
+        with N (x1.4 per doubling for the oracle solve), so a cap measured on the smaller grids stops
+        the finer grids' first steps short of their rtol, and the set they start from then wanders
+        [RESULTS.md]."""
+        if n <= self.lin_maxit_n:
+            return self.lin_maxit_changing
+        return int(round(self.lin_maxit_changing * self.lin_maxit_growth ** math.log2(n / self.lin_maxit_n)))
 
     def cycle_cap(self, stiffness_range):
         """The smallest iteration cap whose exhaustion by a changing free-set step starts the cycles

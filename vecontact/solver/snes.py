@@ -500,7 +500,7 @@ def _ncp_solve(op, g0, tol, max_it, settings, options, monitor, stall_above=0.0)
     else:
         # the atol bounds the max-norm measure: tol / kappa (see policy.py)
         policy = StepPolicy(settings, tol / state.kappa, own=not any(k in options for k in POLICY_OFF),
-                            tol=tol, stiffness_range=op.stiffness_range())
+                            tol=tol, stiffness_range=op.stiffness_range(), n=op.N)
         work = Workspace(fft)            # both step types' whole-grid arrays, held once
         steps = dict(contact=ContactSetStep(op, state.kappa, PETSc, prefix, settings, work),
                      free=FreeSetStep(op, state.kappa, PETSc, prefix, settings, work))
