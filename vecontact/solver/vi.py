@@ -119,15 +119,17 @@ class ViNewton:
         # shorter one than the others', and with vi_capped_restart 0 the settings as they are
         st = self._settings
         longer = self._capped and st.vi_capped_restart > 0
-        step.settings = (replace(st, inner_restart_max=max(st.inner_restart_max, st.vi_restart(
-            fft.N, int(np.prod(fft.local_real_shape)), step.idx.size))) if longer else st)
+        step.settings = st
+        if longer:                                        # act: every local point
+            restart = st.vi_restart(fft.N, act.size, step.idx.size)
+            step.settings = replace(st, inner_restart_max=max(st.inner_restart_max, restart))
         # a float32 basis only with float32 pairs: with float64 ones (the sharp rubber at 2048^2) its
         # tight steps took 2-3x the iterations [RESULTS.md]
         single = step.float32_pairs_hold() and st.step_precision(1.0 / self.rtol)[0]
         step.set_tolerances(self.rtol, 0.0, st.ksp_max_it, single=single)
         if not step.single:
             self._petsc_restart(step, longer)
-        self._loose = self.rtol > step.settings.vi_step_rtol
+        self._loose = self.rtol > st.vi_step_rtol
         ra = r.getArray()
         ra[:] = 0.0
         ra[idx] = x.getArray(readonly=True) / self.state.kappa
