@@ -144,6 +144,20 @@ def test_a_direct_attempt_that_fails_is_followed_by_full_steps_and_bt(monkeypatc
     assert info["direct_retry"]["iterations"] == 10 and info["fallback_retry"]["iterations"] == 20
 
 
+def test_the_attempts_after_a_failed_direct_attempt_take_no_coarse_floor(monkeypatch):
+    """ncp_solve(direct=True, fallback_above=x), a coarse grid's direct VI attempt that fails: the ordinary
+    attempts that follow run without x (a choice, measured: RESULTS.md, "`coarse_stall`"), so their full
+    steps have no coarse stall floor and bt follows them even where they end at a measure below x."""
+    import vecontact.solver.snes as snes
+    calls = []
+    monkeypatch.setattr(snes, "_ncp_solve", _stand_in(calls, 0))     # no attempt converges: all end at 1.0
+    _, _, _, info = snes.ncp_solve(None, np.zeros(2), 1e-8, 50, SolverSettings(), {}, direct=True, fallback_above=2.0)
+    assert [c[1].get("snes_linesearch_type") for c in calls[:3]] == ["bt", None, "bt"]
+    assert [c[5] for c in calls] == [0.0] * len(calls) and not info["converged"]
+    assert info["fallback_direct"] and info["direct_retry"]["iterations"] == 10
+    assert info["fallback_retry"]["iterations"] == 20
+
+
 def test_a_vi_attempt_that_fails_after_full_steps_is_followed_by_bt(monkeypatch):
     """ncp_solve after failed full steps whose VI attempt fails too (vi_stall, say): bt on the full steps
     from the same g0 follows, to fallback_max_it and without the stall rule; every attempt counts,

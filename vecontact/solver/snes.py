@@ -362,7 +362,9 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
     full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
     if that attempt fails, the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none
-    (a line search), info["direct_retry"] holding the first; a failed VI attempt after failed full steps
+    (a line search), info["direct_retry"] holding the first, and without ``fallback_above``: after a failed
+    VI attempt bt is the last resort, and full steps left to run to max_it converged where the coarse
+    stall rule would have handed over to it (RESULTS.md, "`coarse_stall`"); a failed VI attempt after failed full steps
     is followed by bt from ``g0`` (info["vi_retry"] holding it).  Full steps whose last measure is at most
     ``fallback_above`` (a coarse grid that nearly converged) take no fallback; where there is one, they
     end once their measure has reached no new lowest in SolverSettings.coarse_stall Newton iterations
@@ -384,7 +386,8 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
             if again[3]["converged"]:
                 return again
             # the VI method on a large contact set can stall where full steps and bt converge (the SLS at
-            # 1 mm/s, 29 %, in a warm-started chain: RESULTS.md): the ordinary attempts from g0, bt the fallback
+            # 1 mm/s, 29 %, in a warm-started chain: RESULTS.md): the ordinary attempts from g0, bt the fallback,
+            # with no coarse floor (bt is the last resort: the full steps run on)
             later = ncp_solve(op, g0, tol, max_it, replace(settings, fallback="bt" if method == "vi" else "none"),
                               options, monitor)
             later[3]["fallback_direct"] = True
