@@ -137,3 +137,21 @@ def test_profile_shares_classifies_py_spy_stacks(tmp_path):
     for k, n in want.items():
         assert out[k] == pytest.approx(n / 21, abs=1e-12), k
     assert out["in_pair"] == pytest.approx(10 / 21, abs=1e-12)
+
+
+def test_the_matched_overhead_counts_only_oracles_that_met_the_solves_test(bench):
+    """overhead_matched_max: against the oracle refined to the solve's accuracy, where it got there;
+    overhead_max stays the plain oracle's (#15's target); the text names a refinement that fell short."""
+    met = dict(_snes(1024, 10, 0.3, 500.0, 4.0, 0.005, 1.89, None), oracle_iterations=131, oracle_pairs=264.0,
+               oracle_matched_iterations=228, oracle_matched_pairs=461.0, oracle_matched_converged=True,
+               oracle_matched_measure=9.2e-9, oracle_measure=1.4e-4, overhead_matched=500.0 / 461.0)
+    short = dict(met, N=2048, overhead=1.5, oracle_matched_converged=False, oracle_matched_measure=1e-7,
+                 overhead_matched=0.5)
+    plain = dict(_snes(512, 10, 0.05, 80.0, 1.0, 0.005, 1.7, None), oracle_matched_pairs=None,
+                 oracle_matched_converged=None, overhead_matched=None)
+    out = bench.summarise([met, short, plain])
+    assert out["overhead_max"] == 1.89
+    assert out["overhead_matched_max"] == pytest.approx(500.0 / 461.0, rel=1e-12)
+    assert out["overhead_matched_cases"] == "1 of 3"
+    assert "measure 1.0e-07 not met" in bench._oracle_text(short)
+    assert "its measure 1.4e-04" in bench._oracle_text(met) and "overhead_matched=1.08" in bench._oracle_text(met)

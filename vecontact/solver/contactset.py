@@ -45,6 +45,8 @@ import numpy as np
 from mpi4py import MPI
 
 from vecontact.solver.edge import EdgeCorrection
+from vecontact.solver.measurestop import MeasureStop
+from vecontact.solver.newton import NewtonState
 from vecontact.solver.recycle import CarriedSpace, ComplianceKernel
 from vecontact.solver.settings import PETSC_INNER_DEFAULTS
 from vecontact.solver.subset import Restricted, SubsetStep, gather
@@ -204,7 +206,7 @@ class _GMRESStep(ContactSetStep):
         return dict(super().defaults(n_loc), ksp_type="gmres", ksp_pc_side="right")
 
 
-def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, krylov="fgmres"):
+def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, krylov="fgmres", tol=None):
     """The "oracle solve" of issue #15: one Newton step on the final contact set ``act`` (bool, local
     rows), from the uniform pressure p^ = 1 (g^ = -h^), its inner FGMRES run to ``rtol`` (atol 0, at
     most ``max_it`` iterations).  The Newton loop's FFT pairs are judged against its pairs.  The FGMRES
@@ -217,8 +219,18 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
     oracle as right-preconditioned GMRES"), from one basis vector an iteration: twice the iterations fit
     ``memory``; it applies m_CC once more to form the solution (one pair more, and one at each restart).
 
+    ``tol``: also the oracle at the solver's accuracy.  From p^ = 1 the measure starts at 6e2-8e4, and
+    rtol 1e-8 leaves an iterate whose measure is 4e-5-5e-4, where the solver's answer meets tol (1e-8
+    by default); run on, the float64 solve stalls near 1e-7 (1024^2, 10 m/s, 27 %) [RESULTS.md].  So a
+    refinement follows: one more step on the same set from that iterate (its residual: one FFT pair),
+    stopped at the first iterate that meets the solver's own test at ``tol`` (measurestop.MeasureStop,
+    looking at every iteration once within 10x of it) or at ``max_it``.  The looks' FFT pairs are not
+    counted (the solver's steps pay for theirs, so the ratio to this errs against the solver).
+
     Returns dict(iterations, pairs (FFT pairs of the grid of ``op``, set-up included), residual (the
-    inner solve's final residual norm, h_rms), converged, restart)."""
+    inner solve's final residual norm, h_rms), converged, restart); with ``tol`` also matched: dict(
+    plain_measure: of the first solve's iterate, iterations and pairs of both solves, measure of the last
+    iterate looked at, converged: it met tol, look_pairs, looks: MeasureStop.trace)."""
     from vecontact.solver.snes import hold_comm, petsc
     PETSc = petsc()
     fft = op.fft
@@ -234,24 +246,44 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
     step = steps[krylov](op, op.kappa, PETSc, prefix,
                          replace(settings, pc_range_max=0.0, edge_window=0, inner_restart_max=max(1, int(max_it)),
                                  inner_restart_memory=float(memory) * (2 if krylov == "gmres" else 1)))
-    r = y = None
+    r = y = stop = None
     try:
         t0 = fft.transforms
         step.set_active(act, n_act)
         # the restart the KSP was set from (the step's default from ``memory``, or the user's)
         restart = PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
         step.set_tolerances(rtol, 0.0, max_it)
-        # right-hand side -F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = h^_C, (m x)_F = -1
-        rhs = np.where(act, op.hhat, -1.0 / op.kappa)
+        # right-hand side F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = -h^_C, (m x)_F = 1; the
+        # next iterate g0 - x, as the SNES's
+        rhs = np.where(act, -op.hhat, 1.0 / op.kappa)
         r = PETSc.Vec().createMPI((nloc, fft.N * fft.N), comm=comm)
         r.getArray()[:] = rhs.ravel()
         y = r.duplicate()
         step.apply(None, r, y)
         pairs = (fft.transforms - t0) / 2.0
-        return dict(iterations=int(step.iterations), pairs=float(pairs),
-                    residual=float(step.ksp.getResidualNorm()), converged=bool(step.ksp.getConvergedReason() > 0),
-                    restart=restart)
+        out = dict(iterations=int(step.iterations), pairs=float(pairs),
+                   residual=float(step.ksp.getResidualNorm()), converged=bool(step.ksp.getConvergedReason() > 0),
+                   restart=restart)
+        if tol is not None:
+            state = NewtonState(op)
+            state.ensure(-op.hhat - y.getArray(readonly=True).reshape(fft.local_real_shape))
+            stop = MeasureStop(state, tol, PETSc, margin=10.0)
+            stop.attach(step)
+            plain = max(op.measures(state.g, state.p, act))
+            stop.arm(plain)
+            # F(g1) of the refinement on the same set: g on C, p^/kappa on F
+            r.getArray()[:] = np.where(act, state.g, state.p / op.kappa).ravel()
+            step.set_tolerances(0.0, 0.0, max_it)
+            step.apply(None, r, y)
+            measure = stop.trace[-1][2] if stop.trace else None
+            out["matched"] = dict(plain_measure=plain, iterations=int(step.iterations),
+                                  pairs=float((fft.transforms - t0) / 2.0 - stop.pairs), measure=measure,
+                                  converged=measure is not None and measure <= tol, look_pairs=stop.pairs,
+                                  looks=list(stop.trace))
+        return out
     finally:
+        if stop is not None:
+            stop.release()
         step.release()
         for v in (r, y):
             if v is not None:

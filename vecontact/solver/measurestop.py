@@ -29,11 +29,17 @@ class MeasureStop:
     so far, counted as subset.py does, ||r||_2, measure of the trial iterate) of every look.  A look
     costs one FFT pair: the trial's pressure on the free set (freeset.py), the update on the contact
     set, whose pressure increment is then known (contactset.py ``update``); building the Krylov solution
-    may cost one more (GMRES's right preconditioner)."""
+    may cost one more (GMRES's right preconditioner); ``pairs``: the FFT pairs the looks took.
 
-    def __init__(self, state, tol, PETSc):
+    ``margin``: look once the prediction is within this factor of tol (1: the solver's; above 1 the
+    looks come every iteration near the end, so the solve stops at the first iterate that meets the
+    test, not at the first look that does: contactset.oracle_solve's ``tol``)."""
+
+    def __init__(self, state, tol, PETSc, margin=1.0):
         self.state = state
         self.tol = float(tol)
+        self.margin = float(margin)
+        self.pairs = 0.0
         self.CONVERGED = PETSc.KSP.ConvergedReason.CONVERGED_USER
         self.ITERATING = PETSc.KSP.ConvergedReason.ITERATING
         self.armed = False
@@ -77,9 +83,10 @@ class MeasureStop:
         if its == 0:
             self._rho = self._measure / scale if scale > 0 else None
             return False
-        if self._rho is None or self._rho * scale > self.tol:
+        if self._rho is None or self._rho * scale > self.margin * self.tol:
             return False
         st = self.state
+        t0 = st.fft.transforms
         if self._g is None:
             self._g = st.fft.real_array()
             self._p = st.fft.real_array()
@@ -98,6 +105,7 @@ class MeasureStop:
         meas = max(st.op.measures(self._g, self._p))
         self.trace.append((step.krylov_iterations(its), float(rnorm), float(meas)))
         self._rho = meas / scale if scale > 0 else None
+        self.pairs += (st.fft.transforms - t0) / 2.0
         if meas <= self.tol:
             st.keep(self._g, self._p)
             return True
