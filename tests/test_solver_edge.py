@@ -225,9 +225,10 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     long before edge_newton_max, that grid starts again without the term, and so does the finer one:
     from there on the solve is bit for bit the one without the term from the start, plus the first
     attempt's pairs. With the rule off (and fallback_coarse, which would hand that grid and the finer
-    one to the fallback), the coarse grid runs on to coarse_max_it and the fine one stalls too (ended
-    by edge_newton_max or edge_stall; which comes first depends on the FFTs' rounding: 25 alone,
-    24 within the whole suite, measured)."""
+    one to the fallback), the coarse grid runs on to coarse_max_it, and the solve costs several times
+    the pairs. The fine grid then starts from that grid's wandering iterate: whether it stalls too
+    depends on the FFTs' rounding (from empty wisdom, conftest.py, it does and starts again at
+    edge_newton_max; with this machine's wisdom loaded it converged in 20 iterations with the term)."""
     from vecontact.solver import solve_contact
     n = 128
     h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
@@ -247,8 +248,9 @@ def test_steps_at_their_cap_start_the_solve_again_and_the_finer_grids_without_th
     off = solve_contact(fft, L_PAPER, h, mod, 0.01, 3e4, tolerance=1e-8, store=(),
                         petsc_options=["-vc_edge_capped_max 0", "-vc_fallback_coarse off"])
     assert off.diagnostics["levels"][0]["iterations"] == s.coarse_max_it
-    # the fine grid stalls too, and starts again without the term by the count or, sooner, by edge_stall
-    assert s.edge_stall < off.diagnostics["edge_retry"]["iterations"] <= s.edge_newton_max
+    # if the fine grid stalls too, it starts again without the term by the count or, sooner, by edge_stall
+    retry = off.diagnostics["edge_retry"]
+    assert off.converged and (retry is None or s.edge_stall < retry["iterations"] <= s.edge_newton_max)
     assert off.fft_pairs > 3 * r.fft_pairs
 
 

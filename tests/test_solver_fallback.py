@@ -418,15 +418,13 @@ def test_a_solve_whose_full_steps_cycle_hands_over_at_the_return():
     14.4534 at iterations 13-15, measured with this machine's FFTW plans) and hand over at its first
     return, before the stall count (its lowest, 8.8, was at iteration 6); with cycle_rtol 0 they run on
     until the count fires.  Both converge to the same contact set and mu."""
-    import pyfftw
     from vecontact.physics.modulus import HavriliakNegami
     from vecontact.solver import solve_contact
     n, v = 64, 0.01
     h = random_surface(n, L_PAPER, small_spectrum(n), seed=7)
     mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
     sigma0 = 3e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * v]))[0]))
-    # the path rounds with the FFT plans: the estimate planner's, not wisdom that earlier tests loaded
-    pyfftw.forget_wisdom()
+    # the path rounds with the FFT plans: the estimate planner's from empty wisdom (conftest.py)
     fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
     S = SolverSettings()
     runs = {}

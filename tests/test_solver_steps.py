@@ -5,7 +5,6 @@ The check applies the generalised Jacobian independently, J x = P_C x + P_F m x 
 one FFT pair, to the step's answer x for a random right-hand side r.
 """
 import numpy as np
-import pyfftw
 import pytest
 from mpi4py import MPI
 
@@ -279,12 +278,11 @@ _VI_BT = ["-snes_linesearch_type", "bt", "-snes_max_fail", "300"]      # the fal
 
 def _vi_case():
     """The VI tests' 64^2 surface (the reference cases' spectrum, seed 4) and its SlabFFT; the paths
-    round with the FFT plans: the estimate planner's, not wisdom that earlier tests loaded."""
+    round with the FFT plans: the estimate planner's from empty wisdom (conftest.py)."""
     from reference.cases import L_PAPER, small_spectrum
     from reference.dense import random_surface
     n = 64
     h = random_surface(n, L_PAPER, small_spectrum(n), seed=4)
-    pyfftw.forget_wisdom()
     return SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False), h
 
 
