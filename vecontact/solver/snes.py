@@ -358,14 +358,14 @@ def ncp_solve(op, g0, tol, max_it, settings, options=None, monitor=None, direct=
     (vi.py); or a PETSc line search on the full steps (without the term if it was retried), then full
     steps from that attempt's last iterate to ``max_it`` if it stopped short.  The fallback's own
     attempt runs to SolverSettings.fallback_max_it.  All count, info["fallback_retry"] holds the full
-    steps' attempt, and info["edge_retry"] their retry if there was one.  With
-    ``direct`` (a coarser grid of the same solve needed the fallback: contact.py) the solve skips the
-    full steps and starts with the fallback's attempt (info["fallback_direct"] True), if there is one;
-    if that attempt fails, the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none
-    (a line search), info["direct_retry"] holding the first, and without ``fallback_above``: after a failed
-    VI attempt bt is the last resort, and full steps left to run to max_it converged where the coarse
-    stall rule would have handed over to it (RESULTS.md, "`coarse_stall`"); a failed VI attempt after failed full steps
-    is followed by bt from ``g0`` (info["vi_retry"] holding it).  Full steps whose last measure is at most
+    steps' attempt, and info["edge_retry"] their retry if there was one.  With ``direct`` (a coarser
+    grid of the same solve needed the fallback: contact.py) the solve skips the full steps and starts
+    with the fallback's attempt (info["fallback_direct"] True), if there is one; if that attempt fails,
+    the ordinary attempts follow from ``g0`` with bt as the fallback (vi) or none (a line search),
+    info["direct_retry"] holding the first, and without ``fallback_above``: after a failed VI attempt bt
+    is the last resort, and full steps left to run to max_it converged where the coarse stall rule would
+    have handed over to it (RESULTS.md, "`coarse_stall`"); a failed VI attempt after failed full steps is
+    followed by bt from ``g0`` (info["vi_retry"] holding it).  Full steps whose last measure is at most
     ``fallback_above`` (a coarse grid that nearly converged) take no fallback; where there is one, they
     end once their measure has reached no new lowest in SolverSettings.coarse_stall Newton iterations
     while that lowest is above ``fallback_above`` (a coarse grid that wanders; contact.py).
