@@ -253,11 +253,13 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
         # the restart the KSP was set from (the step's default from ``memory``, or the user's)
         restart = PETSc.Options().getInt(step.ksp.getOptionsPrefix() + "ksp_gmres_restart")
         step.set_tolerances(rtol, 0.0, max_it)
-        # right-hand side F(g0) of the step from g0 = -h^ (p^(g0) = 1): x_C = -h^_C, (m x)_F = 1; the
-        # next iterate g0 - x, as the SNES's
-        rhs = np.where(act, -op.hhat, 1.0 / op.kappa)
+        def residual(g, p):
+            """F(g) of a step on the set: g on C, p^/kappa on F (the next iterate g - x, as the SNES's)."""
+            return np.where(act, g, p / op.kappa).ravel()
+
+        # from g0 = -h^, where p^(g0) = 1
         r = PETSc.Vec().createMPI((nloc, fft.N * fft.N), comm=comm)
-        r.getArray()[:] = rhs.ravel()
+        r.getArray()[:] = residual(-op.hhat, 1.0)
         y = r.duplicate()
         step.apply(None, r, y)
         pairs = (fft.transforms - t0) / 2.0
@@ -271,8 +273,7 @@ def oracle_solve(op, act, rtol, max_it, settings, prefix="oracle_", *, memory, k
             stop.attach(step)
             plain = max(op.measures(state.g, state.p, act))
             stop.arm(plain)
-            # F(g1) of the refinement on the same set: g on C, p^/kappa on F
-            r.getArray()[:] = np.where(act, state.g, state.p / op.kappa).ravel()
+            r.getArray()[:] = residual(state.g, state.p)     # the refinement's, from the first solve's iterate
             step.set_tolerances(0.0, 0.0, max_it)
             step.apply(None, r, y)
             measure = stop.trace[-1][2] if stop.trace else None
