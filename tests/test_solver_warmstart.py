@@ -1,6 +1,7 @@
 """The smoothing after a prolongation (vecontact/solver/warmstart.smooth_gap): Chebyshev step sizes,
 checked against the Chebyshev polynomial's bound and, away from contact, against the closed form of
-the linear sweeps mode by mode (stiffness from tests/reference/dense.py, numpy FFTs)."""
+the linear sweeps mode by mode (stiffness from tests/reference/dense.py, numpy FFTs); and the coarse
+grids' SlabFFT cache (warmstart.coarse_fft)."""
 import math
 
 import numpy as np
@@ -13,7 +14,7 @@ from reference.dense import multiplier, random_surface
 from vecontact.core.pfft import SlabFFT
 from vecontact.physics.modulus import HavriliakNegami
 from vecontact.solver.operator import ContactOperator
-from vecontact.solver.warmstart import chebyshev_nodes, smooth_gap
+from vecontact.solver.warmstart import chebyshev_nodes, coarse_fft, smooth_gap
 
 N = 24
 
@@ -110,3 +111,18 @@ def test_a_cycle_of_smoothed_steps_is_broken():
     stuck = solve_contact(fft, L_PAPER, h, mod, 0.001, 1e5, tolerance=1e-8, store=(), max_iterations=30,
                           petsc_options=["-vc_step_return_rtol 0", "-vc_fallback none"])
     assert not stuck.converged and stuck.residual > 1.0
+
+
+def test_coarse_grids_follow_the_fine_grids_wisdom_file(tmp_path):
+    # the coarse SlabFFTs are cached per process; a fine grid with another wisdom file must get coarse
+    # grids of its own, which load and save that file (not the first fine grid's)
+    files = [str(tmp_path / "a.pkl"), str(tmp_path / "b.pkl")]
+    coarse = []
+    for path in files:
+        fine = SlabFFT(MPI.COMM_SELF, 16, planner="estimate", wisdom_file=path)
+        coarse.append(coarse_fft(fine, 8))
+        assert coarse[-1].wisdom_file == path and coarse[-1].N == 8
+        assert coarse_fft(fine, 8) is coarse[-1]          # cached for that file
+    assert coarse[0] is not coarse[1]
+    no_file = SlabFFT(MPI.COMM_SELF, 16, planner="estimate", wisdom_file=False)
+    assert coarse_fft(no_file, 8).wisdom_file is None

@@ -20,12 +20,13 @@ _FFT_CACHE = {}
 
 
 def coarse_fft(fft, n):
-    """A SlabFFT of size n on the same communicator (cached per communicator and size)."""
-    key = (id(fft.comm), fft.comm.size, int(n), fft.threads, fft.planner)
+    """A SlabFFT of size n on the same communicator (cached per communicator, size, threads, planner and
+    wisdom file: a fine grid with another wisdom file gets coarse grids that save into that file)."""
+    wisdom = getattr(fft, "wisdom_file", None) or False
+    key = (id(fft.comm), fft.comm.size, int(n), fft.threads, fft.planner, wisdom)
     f = _FFT_CACHE.get(key)
     if f is None or f.comm is not fft.comm:
-        f = SlabFFT(fft.comm, int(n), threads=fft.threads, planner=fft.planner,
-                    wisdom_file=getattr(fft, "wisdom_file", None) or False)
+        f = SlabFFT(fft.comm, int(n), threads=fft.threads, planner=fft.planner, wisdom_file=wisdom)
         _FFT_CACHE[key] = f
     return f
 
