@@ -290,17 +290,18 @@ def test_npy_load_reads_only_own_rows(tmp_path, monkeypatch):
 
 
 # ------------------------------------------------------------------------------------------ ranks
-def test_bit_identical_on_1_2_3_ranks_and_load_on_2(tmp_path):
+def test_bit_identical_on_1_2_3_4_ranks_and_load_on_2(tmp_path):
     _write_files(tmp_path)
     script = os.path.join(HERE, "scripts", "surface_check.py")
-    for n in (1, 2, 3):
+    for n in (1, 2, 3, 4):
         proc = run_mpi(n, [script, str(tmp_path)], timeout=240)
         assert f"SURFACE_OK {n}" in proc.stdout
-    res = {n: np.load(tmp_path / f"surf_{n}.npz") for n in (1, 2, 3)}
+    res = {n: np.load(tmp_path / f"surf_{n}.npz") for n in (1, 2, 3, 4)}
     here = surface_check.generate_all(COMM)  # in-process single rank too
     for key in res[1].files:
         a = res[1][key]
         assert np.any(a != 0)
         assert np.array_equal(a, res[2][key]), key
         assert np.array_equal(a, res[3][key]), key
+        assert np.array_equal(a, res[4][key]), key
         assert np.array_equal(a, here[key]), key
