@@ -1,5 +1,6 @@
 """The Python API (``import vecontact as vc``): each call against the code it wraps, errors as at
-the command line, results readable with and without pandas, the version everywhere the same."""
+the command line, results readable with and without pandas, the version everywhere the same, and the
+docs' snippets running as written."""
 import importlib.metadata
 import math
 import os
@@ -252,6 +253,25 @@ def test_run_and_read_results_with_and_without_pandas(tmp_path, monkeypatch):
     assert names == ["fig1_spectrum.png", "fig2_friction.png", "fig4_area.png", "fig5_master.png",
                      "gamma_sensitivity.png", "morphology.png", "morphology_vs_v.png", "theory_error.png"]
     assert all(os.path.getsize(p) > 0 for p in paths)
+
+
+def test_the_docs_result_reading_snippets_run_as_written(tmp_path):
+    """Every ``python`` block of README.md, docs/reading-results.md and docs/results-format.md that reads
+    results/demo.h5 runs as written (cwd holding a small job's results under that name)."""
+    pytest.importorskip("pandas")
+    job = small_job(tmp_path, enabled=True)
+    vc.run(job)
+    os.makedirs(tmp_path / "results")
+    os.symlink(job.output, tmp_path / "results" / "demo.h5")
+    blocks = []
+    for doc in ("README.md", os.path.join("docs", "reading-results.md"), os.path.join("docs", "results-format.md")):
+        text = open(os.path.join(ROOT, doc)).read()
+        blocks += [(doc, b) for b in re.findall(r"```python\n(.*?)```", text, re.S) if "results/demo.h5" in b]
+    assert len(blocks) >= 5, [d for d, _ in blocks]
+    for doc, block in blocks:
+        proc = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, cwd=tmp_path,
+                              env=ENV, timeout=120)
+        assert proc.returncode == 0, f"{doc}:\n{block}\n{proc.stderr}"
 
 
 def test_load_job_and_make_job_agree(tmp_path, monkeypatch):
