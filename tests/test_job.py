@@ -1,6 +1,7 @@
 """Job validation: every bad job gives one line naming the key, exit 2, no traceback, no file."""
 import copy
 import os
+import re
 import subprocess
 import sys
 
@@ -216,6 +217,17 @@ def test_shipped_jobs_are_valid():
     assert [q / q0 for q in paper.surface.q1] == [32, 64, 128, 256]
     assert [paper.surface.grid(q1) for q1 in paper.surface.q1] == [512, 1024, 2048, 4096]
     assert paper.sweep.velocity == (0.01, 0.1, 1.0, 10.0)
+
+
+def test_the_documented_job_is_valid_as_written(tmp_path):
+    """docs/job-file.md's full job (every key, with its comments) loads and validates as written."""
+    text = open(os.path.join(ROOT, "docs", "job-file.md")).read()
+    (block,) = re.findall(r"```yaml\n(.*?)```", text, re.S)
+    (tmp_path / "job.yaml").write_text(block)
+    job = jobs.load(str(tmp_path / "job.yaml"))
+    assert os.path.basename(job.output) == "example.h5" and not job.numerics.enabled
+    assert [job.surface.grid(q1) for q1 in job.surface.q1] == [512, 4096]     # N = 2 null_band q1 / q0
+    assert job.sweep.velocity == (0.01, 0.1, 1.0, 10.0)
 
 
 def test_paper_pressures_span_the_area_range():
