@@ -4,8 +4,7 @@ gives the same surface bit for bit and the same results to solver tolerance.
 N = 64 splits unevenly on 3 ranks (22/21/21 rows) and evenly on 2 and 4 (32/32, 16 each); with the
 rfft layout the N/2 + 1 = 33 ky columns split unevenly on 2 ranks (17/16) and 4 (9/8/8/8). N = 90 (not
 a power of two, 45 is odd): rows 30/30/30, 45/45 and 23/23/22/22, ky columns 46 -> 16/15/15, 23/23 and
-12/12/11/11. Viscoelastic (HN, v = 30 m/s,
-A/A0 ~ 10-30%) with SNES, elastic with PK.
+12/12/11/11. Viscoelastic (HN, v = 30 m/s, A/A0 ~ 10-30%) with SNES, elastic with PK.
 
 Tolerances: area within one grid point; pressure fields to 1e-6 sigma0 and gap fields to 1e-6 h_rms
 (max norm; the converged LCP solution is unique, only the iterates differ); mu, mu_geometric to

@@ -115,7 +115,7 @@ def test_a_cycle_of_smoothed_steps_is_broken():
 
 def test_coarse_grids_follow_the_fine_grids_wisdom_file(tmp_path):
     # the coarse SlabFFTs are cached per process; a fine grid with another wisdom file must get coarse
-    # grids of its own, which load and save that file (not the first fine grid's)
+    # grids of its own, made with that file (not the first fine grid's)
     files = [str(tmp_path / "a.pkl"), str(tmp_path / "b.pkl")]
     coarse = []
     for path in files:
