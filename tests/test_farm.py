@@ -376,19 +376,21 @@ def _wait_gone(marker, timeout=30.0):
     """Wait until no process has ``marker`` in its command line (Linux /proc): after a kill -9 of the
     launcher's process group, MPI ranks that the launcher put in a group of their own die a moment
     later, and one may rename its last commit into place before it does."""
-    t0 = time.time()
-    while time.time() - t0 < timeout:
-        alive = False
+    def running():
         for pid in filter(str.isdigit, os.listdir("/proc")):
             try:
                 with open(f"/proc/{pid}/cmdline", "rb") as f:
-                    alive = alive or marker.encode() in f.read()
-            except OSError:
-                continue
-        if not alive:
-            return
+                    if marker.encode() in f.read():
+                        return True
+            except OSError:             # the process ended while we looked
+                pass
+        return False
+
+    t0 = time.time()
+    while running():
+        if time.time() - t0 > timeout:
+            raise AssertionError(f"processes of {marker} still running {timeout} s after kill -9")
         time.sleep(0.05)
-    raise AssertionError(f"processes of {marker} still running {timeout} s after kill -9")
 
 
 def test_kill_and_resume(tmp_path):
