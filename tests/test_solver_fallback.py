@@ -428,7 +428,8 @@ def test_a_solve_whose_full_steps_cycle_hands_over_at_the_return():
     h = random_surface(n, L_PAPER, small_spectrum(n), seed=18)
     mod = HavriliakNegami(3e6, 3e9, 0.8, 0.8, 1e-6, NU)
     sigma0 = 3e-3 * abs(complex(mod(np.array([2 * np.pi / L_PAPER * 8 * v]))[0]))
-    # the path rounds with the FFT plans: the estimate planner's from empty wisdom (conftest.py)
+    # the path rounds with the FFT plans (the estimate planner's from empty wisdom: conftest.py) and the
+    # BLAS kernels (the docstring)
     fft = SlabFFT(MPI.COMM_SELF, n, planner="estimate", wisdom_file=False)
     S = SolverSettings()
     runs = {}
