@@ -3,10 +3,11 @@
 auto gives a grid the fewest ranks per case (a power of two) whose share of the case fits in one
 rank's share of its node: a one-rank case does no transposes, and two one-rank cases at once cost
 0.79-0.87x the core-seconds of the same cases on two ranks at 2048² and 4096²
-(benchmarks/RESULTS.md, "One rank per case at 4096²"); the study's 4096² fast chains, where a one-rank
-case's half restart costs pairs, cost 0.79-0.85x on one rank a case the core-hours they cost on two
-(RESULTS.md, "One rank or two per case, measured again").  Where the node's memory cannot be read,
-auto falls back to the grid rule (schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
+(benchmarks/RESULTS.md, "One rank per case at 4096²"); the study's four 4096² chains, where a one-rank
+case's half restart costs pairs at fast sliding, cost 0.78-0.85x on one rank a case the core-hours
+they cost on two, 0.81x in all (RESULTS.md, "One rank or two per case, measured again" and "The
+study's slow half").  Where the node's memory cannot be read, auto falls back to the grid rule
+(schedule.AUTO_POINTS_PER_RANK) and the farm's start line says so.
 
 Sizes are bytes.  The node's memory is Linux's MemAvailable, capped by the job's cgroup (v2
 ``memory.max`` less ``memory.current``, v1 ``memory.limit_in_bytes`` less ``memory.usage_in_bytes``,
